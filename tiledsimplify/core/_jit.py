@@ -1,0 +1,45 @@
+"""The one numba decorator every kernel uses: compiled, GIL released, cached on disk.
+
+``nogil=True`` lets dask threads run kernels truly in parallel; ``cache=True`` keeps the
+compile cost to the first run on a machine.
+
+Numba's cache checks only the source file of the cached function itself, not of the kernels
+it calls from other modules: edit ``local_mesh.py`` and a cached ``remove_points`` keeps running
+the old ``local_mesh``. So the cache lives in a directory named after a hash of every kernel
+source file of the package; any edit or upgrade starts a fresh cache. The base directory is
+``$NUMBA_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME`` (or ``~/.cache``) ``/tiledsimplify``.
+"""
+
+import hashlib
+import os
+from pathlib import Path
+
+import numba
+
+
+def _cache_dir():
+    here = Path(__file__).resolve().parent
+    digest = hashlib.sha256(numba.__version__.encode())
+    for path in sorted(here.glob("*.py")):
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
+    base = os.environ.get("NUMBA_CACHE_DIR")
+    if base:
+        root = Path(base)
+    else:
+        root = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "tiledsimplify"
+    return root / f"kernels-{digest.hexdigest()[:16]}"
+
+
+def _set_cache_dir():
+    try:
+        path = _cache_dir()
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return  # not writable: numba falls back to its own locations
+    numba.config.CACHE_DIR = str(path)
+
+
+_set_cache_dir()
+
+jit = numba.njit(cache=True, nogil=True)

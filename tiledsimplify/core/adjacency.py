@@ -1,0 +1,89 @@
+"""Growable per-point neighbour lists in one flat pool, usable inside numba kernels.
+
+The Voronoi neighbourhoods change under removal (a removed point's neighbours gain each other,
+paper §3.3), so each point owns a block ``pool[start[i] : start[i] + cap[i]]`` of which the first
+``cnt[i]`` entries are used. A full block moves to the end of the pool with twice the capacity;
+a full pool doubles. Order inside a block is not meaningful.
+"""
+
+import numpy as np
+
+from ._jit import jit
+
+
+def from_edges(n, edges, slack=8):
+    """Build ``(start, cnt, cap, pool)`` from undirected ``edges`` (k, 2) on ``n`` points."""
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    src = np.concatenate([edges[:, 0], edges[:, 1]])
+    dst = np.concatenate([edges[:, 1], edges[:, 0]])
+    order = np.lexsort((dst, src))
+    src, dst = src[order], dst[order]
+    cnt = np.bincount(src, minlength=n).astype(np.int64)
+    cap = cnt + slack
+    start = np.zeros(n, dtype=np.int64)
+    np.cumsum(cap[:-1], out=start[1:])
+    used = int(cap.sum())
+    pool = np.full(max(2 * used, 16), -1, dtype=np.int32)
+    first = np.zeros(n, dtype=np.int64)
+    np.cumsum(cnt[:-1], out=first[1:])
+    rank_in_src = np.arange(src.size) - first[src]
+    pool[start[src] + rank_in_src] = dst
+    meta = np.array([used], dtype=np.int64)
+    return start, cnt, cap, pool, meta
+
+
+def to_sets(start, cnt, pool, alive=None):
+    """Neighbour lists as a list of Python sets (for tests and debugging)."""
+    n = start.size
+    out = []
+    for i in range(n):
+        if alive is not None and not alive[i]:
+            out.append(set())
+            continue
+        out.append(set(int(j) for j in pool[start[i]:start[i] + cnt[i]]))
+    return out
+
+
+@jit
+def contains(start, cnt, pool, i, j):
+    """True if ``j`` is in the list of ``i``."""
+    s = start[i]
+    for k in range(cnt[i]):
+        if pool[s + k] == j:
+            return True
+    return False
+
+
+@jit
+def remove(start, cnt, pool, i, j):
+    """Remove ``j`` from the list of ``i`` (swap with the last entry). True if it was there."""
+    s = start[i]
+    c = cnt[i]
+    for k in range(c):
+        if pool[s + k] == j:
+            pool[s + k] = pool[s + c - 1]
+            cnt[i] = c - 1
+            return True
+    return False
+
+
+@jit
+def append(start, cnt, cap, pool, meta, i, j):
+    """Append ``j`` to the list of ``i``; returns the pool (a new array if it had to grow)."""
+    c = cnt[i]
+    if c == cap[i]:
+        newcap = max(2 * cap[i], 8)
+        used = meta[0]
+        if used + newcap > pool.size:
+            bigger = np.full(max(2 * pool.size, used + newcap), -1, dtype=pool.dtype)
+            bigger[:used] = pool[:used]
+            pool = bigger
+        s_old = start[i]
+        for k in range(c):
+            pool[used + k] = pool[s_old + k]
+        start[i] = used
+        cap[i] = newcap
+        meta[0] = used + newcap
+    pool[start[i] + c] = j
+    cnt[i] = c + 1
+    return pool

@@ -1,0 +1,81 @@
+"""Convex polygon clipping by half-planes, with the label of the constraint behind each edge.
+
+Both Voronoi constructions of the core reduce to this one primitive:
+
+* the 3-D Voronoi facet shared by two points is their bisector plane clipped by the half-spaces
+  of every other nearby point (:mod:`.voronoi`), and
+* the 2-D Voronoi cell of a point among its neighbours projected to the tangent plane is a
+  square clipped by the neighbours' bisectors (:mod:`.local_mesh`).
+
+Sutherland & Hodgman, "Reentrant polygon clipping", CACM 17(1), 1974, specialised to convex
+polygons and one half-plane at a time.
+"""
+
+from ._jit import jit
+
+
+@jit
+def square(half, xs, ys, labels):
+    """Write the square ``[-half, half]^2`` (counter-clockwise, edges labelled -1); return 4."""
+    xs[0], ys[0] = -half, -half
+    xs[1], ys[1] = half, -half
+    xs[2], ys[2] = half, half
+    xs[3], ys[3] = -half, half
+    for i in range(4):
+        labels[i] = -1
+    return 4
+
+
+@jit
+def clip(n, xs, ys, labels, gx, gy, h, label, ox, oy, olabels):
+    """Clip the convex polygon ``(xs, ys)[:n]`` to ``gx*x + gy*y <= h``.
+
+    ``labels[i]`` names the constraint that made the edge from vertex ``i`` to vertex ``i+1``;
+    the new edge along the clipping line gets ``label``.
+
+    Returns
+    -------
+    int
+        ``-1`` if the polygon is inside the half-plane (nothing written: keep the input),
+        otherwise the number of vertices written to ``(ox, oy, olabels)`` (0 = empty).
+    """
+    inside = True
+    outside = True
+    for i in range(n):
+        d = gx * xs[i] + gy * ys[i] - h
+        if d > 0.0:
+            inside = False
+        else:
+            outside = False
+    if inside:
+        return -1
+    if outside:
+        return 0
+    m = 0
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        xi, yi, xj, yj = xs[i], ys[i], xs[j], ys[j]
+        di = gx * xi + gy * yi - h
+        dj = gx * xj + gy * yj - h
+        if di <= 0.0:
+            ox[m], oy[m], olabels[m] = xi, yi, labels[i]
+            m += 1
+            if dj > 0.0:
+                t = di / (di - dj)
+                ox[m], oy[m], olabels[m] = xi + t * (xj - xi), yi + t * (yj - yi), label
+                m += 1
+        elif dj <= 0.0:
+            t = di / (di - dj)
+            ox[m], oy[m], olabels[m] = xi + t * (xj - xi), yi + t * (yj - yi), labels[i]
+            m += 1
+    return m
+
+
+@jit
+def area(n, xs, ys):
+    """Signed area of the polygon ``(xs, ys)[:n]`` (positive when counter-clockwise)."""
+    s = 0.0
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        s += xs[i] * ys[j] - xs[j] * ys[i]
+    return 0.5 * s
