@@ -1,0 +1,162 @@
+"""Naive, obviously-correct twins of the core kernels (slow; for tests only)."""
+
+import numpy as np
+from scipy.optimize import linprog
+from scipy.spatial import Delaunay, Voronoi
+
+from tiledsimplify.core import local_mesh as lm
+
+
+def facet_width(X, a, b, others, half):
+    """Largest radius of a disc inside the Voronoi facet of (a, b), clipped to the square of
+    half-size ``half`` around their midpoint, by linear programming (negative: no facet)."""
+    pa = X[a]
+    d = X[b] - pa
+    L = np.linalg.norm(d)
+    u = d / L
+    e1 = np.cross(u, [1.0, 0.0, 0.0])
+    if np.linalg.norm(e1) < 0.5:
+        e1 = np.cross(u, [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+    m = d / 2
+    A, bb = [], []
+    for s in others:
+        if s == a or s == b:
+            continue
+        sp = X[s] - pa
+        g = np.array([2 * sp @ e1, 2 * sp @ e2])
+        h = sp @ sp - 2 * sp @ m
+        gn = np.linalg.norm(g)
+        if gn < 1e-12 * L:
+            if h < 0:
+                return -1.0
+            continue
+        A.append([g[0] / gn, g[1] / gn, 1.0])
+        bb.append(h / gn)
+    for gx, gy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        A.append([gx, gy, 1.0])
+        bb.append(half)
+    r = linprog([0, 0, -1], A_ub=np.array(A), b_ub=np.array(bb),
+                bounds=[(None, None), (None, None), (None, None)], method="highs")
+    return float(r.x[2]) if r.status == 0 else -1.0
+
+
+def voronoi_edges(X, half, tol, candidates=None):
+    """Pairs whose facet (against *all* other points) is wider than ``tol``, by LP."""
+    n = len(X)
+    if candidates is None:
+        candidates = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    out = set()
+    for a, b in candidates:
+        if facet_width(X, a, b, range(n), half) > tol:
+            out.add((min(a, b), max(a, b)))
+    return out
+
+
+def delaunay_edges(X):
+    tri = Delaunay(X)
+    e = set()
+    for s in tri.simplices:
+        for i in range(4):
+            for j in range(i + 1, 4):
+                a, b = sorted((int(s[i]), int(s[j])))
+                e.add((a, b))
+    return e
+
+
+def reference_plane(X, p, vn):
+    """Steps 1-2 of the local-mesh rule with numpy: sorted, cut neighbours and plane normal."""
+    vn = np.asarray(sorted(vn, key=lambda q: (float(np.sum((X[q] - X[p]) ** 2)), q)))
+    d = np.linalg.norm(X[vn] - X[p], axis=1)
+    jumps = [j for j in range(3, len(vn)) if d[j] > lm.GAP * d[j - 1]]
+    if jumps:
+        vn, d = vn[: jumps[0]], d[: jumps[0]]
+    m = len(vn)
+    if m >= 3:
+        m = int(np.sum(d <= lm.FIT * d[2]))
+    best, kbest = -1.0, m
+    for k in range(2, m + 1):
+        P = np.vstack([X[p], X[vn[:k]]])
+        w = np.linalg.eigvalsh(np.cov(P.T, bias=True))
+        spread = w[1] / w[2] if w[2] > 0 else 0.0
+        if k >= lm.MIN_PLANE and spread >= lm.SPREAD:
+            kbest = k
+            break
+        if spread > best:
+            best, kbest = spread, k
+    P = np.vstack([X[p], X[vn[:kbest]]])
+    w, v = np.linalg.eigh(np.cov(P.T, bias=True))
+    return vn, v[:, 0], float(d[kbest - 1])
+
+
+def local_mesh(X, p, vn):
+    """``DN_p`` via scipy's 2-D Voronoi of the projected neighbours, or None when ``p``'s cell
+    is unbounded or reaches the clipping square (the rule's box then matters)."""
+    vn, n0, radius = reference_plane(X, p, vn)
+    half = lm.BOX * radius
+    rel = X[vn] - X[p]
+    dist = np.linalg.norm(rel, axis=1)
+    ok = np.abs(rel @ n0) <= np.sin(np.radians(lm.MAX_ELEVATION)) * dist
+    cand = vn[ok]
+    t1 = np.cross(n0, [1, 0, 0])
+    if np.linalg.norm(t1) < 0.5:
+        t1 = np.cross(n0, [0, 1, 0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n0, t1)
+    P2 = np.vstack([[0.0, 0.0], np.c_[rel[ok] @ t1, rel[ok] @ t2]])
+    if len(P2) < 4:
+        return None
+    try:
+        vor = Voronoi(P2)
+    except Exception:
+        return None
+    region = vor.regions[vor.point_region[0]]
+    if -1 in region or len(region) == 0:
+        return None
+    if np.abs(vor.vertices[region]).max() >= half:
+        return None
+    out = set()
+    for (i, j), rv in zip(vor.ridge_points, vor.ridge_vertices):
+        if 0 in (i, j) and -1 not in rv:
+            length = np.linalg.norm(vor.vertices[rv[0]] - vor.vertices[rv[1]])
+            if length > 1e-9 * half:
+                out.add(int(cand[(j if i == 0 else i) - 1]))
+    return out
+
+
+def normal(X, p, dn, fallback):
+    P = np.vstack([X[p], X[list(dn)]])
+    w, v = np.linalg.eigh(np.cov(P.T, bias=True))
+    if len(dn) < 2 or w[1] <= lm.SPREAD * w[2]:
+        return fallback
+    return v[:, 0]
+
+
+def deviation(X, normals, p, dn):
+    """The boundary measure by ``np.linalg.lstsq``: RMS residual of g = W u, W symmetric."""
+    if len(dn) < 3:
+        return 0.0
+    n = normals[p]
+    t1 = np.cross(n, [1, 0, 0])
+    if np.linalg.norm(t1) < 0.5:
+        t1 = np.cross(n, [0, 1, 0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n, t1)
+    rel = X[list(dn)] - X[p]
+    rel = rel / np.sqrt(np.mean(np.sum(rel ** 2, axis=1)))
+    nq = normals[list(dn)] * np.sign(normals[list(dn)] @ n)[:, None]
+    u, v = rel @ t1, rel @ t2
+    g1, g2 = nq @ t1, nq @ t2
+    z = np.zeros_like(u)
+    M = np.vstack([np.c_[u, v, z], np.c_[z, u, v]])
+    g = np.concatenate([g1, g2])
+    x, *_ = np.linalg.lstsq(M, g, rcond=None)
+    r = g - M @ x
+    return float(np.sqrt(np.sum(r ** 2) / (2 * len(dn))))
+
+
+def importance(X, normals, boundary, p, dn):
+    """Eq. (1), literally."""
+    terms = [abs((X[p] - X[q]) @ normals[q]) for q in dn if not boundary[q]]
+    return float(np.mean(terms)) if terms else np.inf
