@@ -1,0 +1,112 @@
+"""Progressive removal: the maintained state equals a from-scratch recomputation (paper §3.3)."""
+
+import numpy as np
+import pytest
+
+from tiledsimplify.core import adjacency, boundary, importance
+from tiledsimplify.core.removal import remove_points
+from tiledsimplify.core.simplify import neighbourhoods
+from tiledsimplify.core.voronoi import BOX_FACTOR, TOL_FACTOR, scale_of
+
+
+def _cloud(kind, n, seed=0):
+    rng = np.random.default_rng(seed)
+    if kind == "wavy":
+        xy = rng.random((n, 2)) * 3
+        X = np.c_[xy, 0.4 * np.sin(2 * xy[:, 0]) * np.cos(1.5 * xy[:, 1])]
+    elif kind == "box":  # the surface of a box: planes and sharp edges
+        face = rng.integers(0, 6, n)
+        uv = rng.random((n, 2))
+        X = np.zeros((n, 3))
+        axis, side = face // 2, face % 2
+        for a in range(3):
+            m = axis == a
+            others = [b for b in range(3) if b != a]
+            X[m, a] = side[m]
+            X[m, others[0]] = uv[m, 0]
+            X[m, others[1]] = uv[m, 1]
+        X *= [2.0, 1.0, 0.7]
+    else:  # LAS-like quantised terrain
+        xy = rng.random((n, 2)) * 20
+        X = np.c_[xy, np.sin(xy[:, 0] / 3) + 0.1 * xy[:, 1]]
+        X = np.unique(np.round(X * 1000) / 1000, axis=0)
+    return X - X.mean(0)
+
+
+def _state(X):
+    D = scale_of(X)
+    st = neighbourhoods(X, D)
+    dev = np.zeros(len(X))
+    boundary.all_deviations(X, st.normals, st.dn, st.dn_cnt, dev)
+    flags, _ = boundary.detect(dev)
+    imp = np.zeros(len(X))
+    importance.all_importance(0, X, st.normals, flags, st.dn, st.dn_cnt, imp)
+    return D, st, flags, imp
+
+
+@pytest.mark.parametrize("kind", ["wavy", "box", "quantised"])
+def test_maintained_state_equals_recomputation(kind):
+    X = _cloud(kind, 1500)
+    D, st, flags, imp = _state(X)
+    frozen = np.zeros(len(X), bool)
+    frozen[::17] = True
+    removable = ~flags & ~frozen
+    steps = int(removable.sum()) * 3 // 4
+    order, at, st.pool = remove_points(
+        X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
+        st.normals, flags, removable.copy(), imp, 0, steps, BOX_FACTOR * D, TOL_FACTOR * D)
+    assert len(order) == steps == len(set(order.tolist()))
+    assert not (flags[order] | frozen[order]).any()
+    alive = np.ones(len(X), bool)
+    alive[order] = False
+    keep = np.flatnonzero(alive)
+    fresh = neighbourhoods(X[keep], D)
+    vn_m = adjacency.to_sets(st.start, st.cnt, st.pool)
+    vn_f = adjacency.to_sets(fresh.start, fresh.cnt, fresh.pool)
+    imp_f = np.zeros(len(keep))
+    importance.all_importance(0, X[keep], fresh.normals, flags[keep], fresh.dn, fresh.dn_cnt,
+                              imp_f)
+    for i, p in enumerate(keep):
+        assert vn_m[p] == {int(keep[j]) for j in vn_f[i]}, p
+        dn_m = st.dn[p, : st.dn_cnt[p]].tolist()
+        dn_f = keep[fresh.dn[i, : fresh.dn_cnt[i]]].tolist()
+        assert dn_m == dn_f, p
+        np.testing.assert_array_equal(st.normals[p], fresh.normals[i])
+        if removable[p]:
+            assert imp[p] == imp_f[i], p
+
+
+def _naive_greedy(X, flags, frozen, steps, D):
+    """Recompute everything from scratch before every removal."""
+    alive = np.ones(len(X), bool)
+    order, at = [], []
+    for _ in range(steps):
+        keep = np.flatnonzero(alive)
+        st = neighbourhoods(X[keep], D)
+        imp = np.zeros(len(keep))
+        importance.all_importance(0, X[keep], st.normals, flags[keep], st.dn, st.dn_cnt, imp)
+        cand = [(imp[i], int(keep[i])) for i in range(len(keep))
+                if not flags[keep[i]] and not frozen[keep[i]]]
+        if not cand:
+            break
+        v, p = min(cand)
+        order.append(p)
+        at.append(v)
+        alive[p] = False
+    return order, at
+
+
+@pytest.mark.parametrize("kind", ["wavy", "box"])
+def test_greedy_order_equals_naive_from_scratch(kind):
+    X = _cloud(kind, 160, seed=1)
+    D, st, flags, imp = _state(X)
+    frozen = np.zeros(len(X), bool)
+    frozen[:10] = True
+    removable = ~flags & ~frozen
+    steps = int(removable.sum()) - 5
+    order, at, _ = remove_points(
+        X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
+        st.normals, flags, removable.copy(), imp, 0, steps, BOX_FACTOR * D, TOL_FACTOR * D)
+    ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D)
+    assert order.tolist() == ref_order
+    np.testing.assert_array_equal(at, ref_at)

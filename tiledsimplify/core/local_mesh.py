@@ -1,0 +1,264 @@
+"""Local Voronoi mesh neighbours ``DN_p ⊆ VN_p``: the one-ring (umbrella) around each point.
+
+Paper §3.1, after OuYang & Feng (2005): from the Voronoi neighbours, choose those close to ``p``
+that form a local mesh centred at ``p``. The selection rule implemented here:
+
+1. Sort ``VN_p`` by distance to ``p`` (ties by index) and cut the list where the distance jumps
+   by more than ``GAP`` times (after at least three): beyond such a jump lie Voronoi neighbours
+   across the inside of the object or across open air (at the border of a scan, a point's
+   cell reaches the far side), not surface neighbours.
+2. Reference plane: PCA of ``p`` and its nearest Voronoi neighbours, starting with the
+   ``MIN_PLANE`` nearest and adding the next nearest until they are not collinear (middle
+   eigenvalue at least ``SPREAD`` of the largest) — scan lines sample far more densely along a
+   line than across lines, and a plane through one line is meaningless. If no such set exists
+   within ``FIT`` times the third-nearest distance, the nearest set of largest spread (at
+   least three points with ``p``).
+3. Drop neighbours seen at more than ``MAX_ELEVATION`` from that plane (points across a thin
+   wall or across the inside of the object are Voronoi neighbours but not surface neighbours).
+4. Project the rest onto the plane and clip ``p``'s 2-D Voronoi cell among them, inside a square
+   of half-size ``BOX`` times the farthest plane-fit neighbour's distance. ``DN_p`` are the
+   neighbours that own an edge of that cell (edges shorter than ``1e-9`` of the square are
+   co-circular ties and do not count).
+5. If fewer than three neighbours own an edge (collinear data, a handful of points), ``DN_p``
+   falls back to the nearest three Voronoi neighbours.
+
+``DN_p`` is returned sorted by index, so everything computed from it is independent of the
+order in which the lists were built or updated.
+"""
+
+import math
+
+import numpy as np
+
+from ._jit import jit
+from .clip import clip, square
+from .linalg import smallest_axis, sym3_eigvals, tangent_basis
+
+#: neighbours used for the reference plane, at least
+MIN_PLANE = 6
+#: the plane-fit neighbours must not be collinear: middle / largest eigenvalue at least this
+SPREAD = 0.05
+#: neighbours steeper than this above the reference plane are not surface neighbours (degrees)
+MAX_ELEVATION = 60.0
+#: the 2-D cell is clipped inside a square of this many times the plane-fit radius
+BOX = 2.0
+#: the reference plane uses neighbours within this many times the third-nearest distance
+FIT = 3.0
+#: the neighbour list is cut where the distance to p jumps by more than this factor
+GAP = 4.0
+#: at most this many local-mesh neighbours are stored per point
+MAX_DN = 32
+
+_SIN_ELEV = math.sin(math.radians(MAX_ELEVATION))
+
+
+@jit
+def _sort_by_distance(X, p, nbr, m, idx, d2):
+    """Fill ``idx[:m], d2[:m]`` with the neighbours and squared distances, sorted (insertion)."""
+    px, py, pz = X[p, 0], X[p, 1], X[p, 2]
+    for k in range(m):
+        q = nbr[k]
+        dx, dy, dz = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
+        dd = dx * dx + dy * dy + dz * dz
+        j = k
+        while j > 0 and (d2[j - 1] > dd or (d2[j - 1] == dd and idx[j - 1] > q)):
+            d2[j] = d2[j - 1]
+            idx[j] = idx[j - 1]
+            j -= 1
+        d2[j] = dd
+        idx[j] = q
+
+
+@jit
+def _plane_size(X, p, idx, d2, m):
+    """How many of the sorted neighbours ``idx[:m]`` the reference plane is fitted to.
+
+    The first ``k >= MIN_PLANE`` whose spread (middle / largest eigenvalue of the covariance
+    of ``p`` and the ``k`` nearest) reaches ``SPREAD``; if none does (a point on the open border
+    of a scan sees mostly points along the border), the ``k`` of largest spread. Only neighbours
+    within ``FIT`` times the third-nearest distance take part: a border point's Voronoi
+    neighbours include far points whose spread would "win" with a plane across open air.
+    """
+    if m >= 3:
+        limit = FIT * FIT * d2[2]
+        for j in range(3, m):
+            if d2[j] > limit:
+                m = j
+                break
+    px, py, pz = X[p, 0], X[p, 1], X[p, 2]
+    sx = sy = sz = 0.0
+    sxx = sxy = sxz = syy = syz = szz = 0.0
+    best = -1.0
+    kbest = m
+    for k in range(1, m + 1):
+        q = idx[k - 1]
+        x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
+        sx += x
+        sy += y
+        sz += z
+        sxx += x * x
+        sxy += x * y
+        sxz += x * z
+        syy += y * y
+        syz += y * z
+        szz += z * z
+        if k < 2:
+            continue
+        cnt = k + 1.0
+        mx, my, mz = sx / cnt, sy / cnt, sz / cnt
+        l0, l1, l2 = sym3_eigvals(sxx / cnt - mx * mx, sxy / cnt - mx * my,
+                                  sxz / cnt - mx * mz, syy / cnt - my * my,
+                                  syz / cnt - my * mz, szz / cnt - mz * mz)
+        spread = l1 / l2 if l2 > 0.0 else 0.0
+        if k >= MIN_PLANE and spread >= SPREAD:
+            return k
+        if spread > best:
+            best = spread
+            kbest = k
+    return kbest
+
+
+@jit
+def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame):
+    """Select ``DN_p`` from the Voronoi neighbours ``nbr[:m]`` of ``p``; returns its size.
+
+    The selected indices are written, sorted, to ``out``; the reference-plane normal to
+    ``normal0``. ``work`` is an int64 buffer and ``fbufs`` (5, >= m + 5) / ``lbufs``
+    (3, >= m + 5) / ``frame`` (2, 3) scratch.
+    """
+    if m == 0:
+        normal0[0], normal0[1], normal0[2] = 0.0, 0.0, 1.0
+        return 0
+    idx = work
+    d2 = fbufs[4]
+    _sort_by_distance(X, p, nbr, m, idx, d2)
+    for j in range(3, m):
+        if d2[j] > GAP * GAP * d2[j - 1]:
+            m = j
+            break
+    px, py, pz = X[p, 0], X[p, 1], X[p, 2]
+    # 2. reference plane from the nearest, non-collinear neighbours (p included)
+    kbest = _plane_size(X, p, idx, d2, m)
+    sx = sy = sz = 0.0
+    sxx = sxy = sxz = syy = syz = szz = 0.0
+    for j in range(kbest):
+        q = idx[j]
+        x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
+        sx += x
+        sy += y
+        sz += z
+        sxx += x * x
+        sxy += x * y
+        sxz += x * z
+        syy += y * y
+        syz += y * z
+        szz += z * z
+    k = kbest
+    cnt = kbest + 1.0
+    mx, my, mz = sx / cnt, sy / cnt, sz / cnt
+    c00 = sxx / cnt - mx * mx
+    c01 = sxy / cnt - mx * my
+    c02 = sxz / cnt - mx * mz
+    c11 = syy / cnt - my * my
+    c12 = syz / cnt - my * mz
+    c22 = szz / cnt - mz * mz
+    t1 = frame[0]
+    t2 = frame[1]
+    smallest_axis(c00, c01, c02, c11, c12, c22, normal0, t1)
+    tangent_basis(normal0, t1, t2)
+    radius = math.sqrt(d2[k - 1])
+    half = BOX * radius
+    # 4. clip p's 2-D Voronoi cell among the projected neighbours
+    xa, ya, xb, yb = fbufs[0], fbufs[1], fbufs[2], fbufs[3]
+    la, lb = lbufs[0], lbufs[1]
+    n = square(half, xa, ya, la)
+    cur = 0
+    rmax2 = 2.0 * half * half  # squared radius of the current cell (its farthest vertex)
+    for j in range(m):
+        # a neighbour at 3-D distance d projects to at least d * cos(elevation) >= d / 2:
+        # once d / 2 exceeds twice the cell's radius, no farther neighbour can cut the cell
+        if d2[j] > 16.0 * rmax2:
+            break
+        q = idx[j]
+        x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
+        dist = math.sqrt(d2[j])
+        elev = x * normal0[0] + y * normal0[1] + z * normal0[2]
+        if abs(elev) > _SIN_ELEV * dist:
+            continue
+        u = x * t1[0] + y * t1[1] + z * t1[2]
+        v = x * t2[0] + y * t2[1] + z * t2[2]
+        g = math.sqrt(u * u + v * v)
+        if g == 0.0:
+            continue
+        h = 0.5 * g
+        if cur == 0:
+            r = clip(n, xa, ya, la, u / g, v / g, h, j, xb, yb, lb)
+        else:
+            r = clip(n, xb, yb, lb, u / g, v / g, h, j, xa, ya, la)
+        if r < 0:
+            continue
+        n = r
+        cur = 1 - cur
+        if n == 0:
+            break
+        rmax2 = 0.0
+        for i in range(n):
+            if cur == 0:
+                rr = xa[i] * xa[i] + ya[i] * ya[i]
+            else:
+                rr = xb[i] * xb[i] + yb[i] * yb[i]
+            if rr > rmax2:
+                rmax2 = rr
+    # collect the owners of cell edges of non-negligible length
+    if cur == 0:
+        xs, ys, ls = xa, ya, la
+    else:
+        xs, ys, ls = xb, yb, lb
+    flag = lbufs[2]
+    for j in range(m):
+        flag[j] = 0
+    eps = 1e-9 * half
+    for i in range(n):
+        lab = ls[i]
+        if lab < 0:
+            continue
+        i2 = i + 1 if i + 1 < n else 0
+        ex, ey = xs[i2] - xs[i], ys[i2] - ys[i]
+        if ex * ex + ey * ey > eps * eps:
+            flag[lab] = 1
+    c = 0
+    for j in range(m):
+        if flag[j] == 1 and c < MAX_DN:
+            out[c] = idx[j]
+            c += 1
+    if c < 3:
+        c = min(3, m)
+        for j in range(c):
+            out[j] = idx[j]
+    # sort by index (insertion sort; c is small)
+    for a in range(1, c):
+        v = out[a]
+        b = a
+        while b > 0 and out[b - 1] > v:
+            out[b] = out[b - 1]
+            b -= 1
+        out[b] = v
+    return c
+
+
+@jit
+def all_local_meshes(X, start, cnt, pool, dn, dn_cnt, plane_normals):
+    """``DN_p`` for every point from the Voronoi-neighbour lists (see :func:`local_mesh`)."""
+    n = X.shape[0]
+    maxdeg = 1
+    for i in range(n):
+        if cnt[i] > maxdeg:
+            maxdeg = cnt[i]
+    work = np.empty(maxdeg, dtype=np.int64)
+    fbufs = np.empty((5, maxdeg + 5))
+    lbufs = np.empty((3, maxdeg + 5), dtype=np.int64)
+    frame = np.empty((2, 3))
+    for p in range(n):
+        s = start[p]
+        dn_cnt[p] = local_mesh(X, p, pool[s:s + cnt[p]], cnt[p], dn[p], work, fbufs, lbufs,
+                               plane_normals[p], frame)

@@ -1,0 +1,67 @@
+"""Options of the core simplification, validated once."""
+
+from dataclasses import dataclass, fields
+
+from ..errors import InputError
+from .boundary import FLOOR, K_SIGMA
+from .importance import MEASURES
+
+MODES = ("paper",)
+
+
+@dataclass(frozen=True)
+class SimplifyOptions:
+    """How :func:`~tiledsimplify.simplify_points` decides what to keep.
+
+    Parameters
+    ----------
+    mode : {"paper"}
+        ``"paper"``: Song & Feng's algorithm as published — boundary points flagged by normal
+        deviation and kept, then greedy removal by Eq. (1).
+    importance : {"paper"}
+        The importance measure (see :mod:`tiledsimplify.core.importance`).
+    detect_boundary : bool
+        Flag and keep sharp-edge points (paper §3.1). False treats every point as smooth.
+    boundary_threshold : float or None
+        Fixed threshold on the normal-deviation measure; None finds it automatically.
+    boundary_k : float
+        Automatic threshold: robust standard deviations above the median.
+    boundary_floor : float
+        Automatic threshold: lower bound (radians).
+    progressive : bool
+        Keep removing past the target (recording rank and importance) until only boundary and
+        frozen points remain, so :meth:`SimplifyResult.keep_at` can answer any coarser count.
+        The kept set at the target is the same either way; False is ~10 % faster at ratio 0.1.
+    """
+
+    mode: str = "paper"
+    importance: str = "paper"
+    detect_boundary: bool = True
+    boundary_threshold: float | None = None
+    boundary_k: float = K_SIGMA
+    boundary_floor: float = FLOOR
+    progressive: bool = True
+
+    def __post_init__(self):
+        if self.mode not in MODES:
+            raise InputError(f"options.mode must be one of {MODES}, got {self.mode!r}.")
+        if self.importance not in MEASURES:
+            raise InputError(
+                f"options.importance must be one of {tuple(MEASURES)}, got {self.importance!r}.")
+        if self.boundary_threshold is not None and not self.boundary_threshold >= 0:
+            raise InputError("options.boundary_threshold must be a non-negative number or None,"
+                             f" got {self.boundary_threshold!r}.")
+        if not self.boundary_k > 0:
+            raise InputError(f"options.boundary_k must be positive, got {self.boundary_k!r}.")
+        if not self.boundary_floor >= 0:
+            raise InputError(
+                f"options.boundary_floor must be non-negative, got {self.boundary_floor!r}.")
+
+    @classmethod
+    def from_mapping(cls, mapping):
+        """Build from a dict (e.g. a TOML table), rejecting unknown keys by name."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(mapping) - known)
+        if unknown:
+            raise InputError(f"unknown simplify option(s) {unknown}; known: {sorted(known)}.")
+        return cls(**mapping)

@@ -1,0 +1,152 @@
+"""Progressive removal of the least important point, with exact local updates (paper §3.3).
+
+Each step removes the point of smallest importance, then updates exactly what the removal
+changes (Fig. 1):
+
+1. the Voronoi neighbourhoods around it (:func:`.voronoi.remove_point`: the former neighbours
+   of ``p`` may become neighbours of each other);
+2. the local meshes ``DN_a`` and normals of those former neighbours ``a`` (the first ring) —
+   ``DN_a ⊆ VN_a`` depends on nothing else;
+3. the importance of every point whose local mesh changed, and of every point with a neighbour
+   whose normal changed (the second ring: points ``x`` with ``a ∈ DN_x``, found in ``VN_a``).
+
+Boundary and frozen points are never removed but stay in every neighbourhood. The removal order
+and the importance at removal are recorded for every step, so one run answers every coarser
+count (and a tiled run can cut all tiles at one importance level).
+"""
+
+import numpy as np
+
+from . import heap
+from ._jit import jit
+from .importance import importance_of
+from .local_mesh import MAX_DN, local_mesh
+from .normals import normal_at
+from .voronoi import remove_point
+
+
+@jit
+def _max_count(cnt, items, k):
+    m = 0
+    for j in range(k):
+        c = cnt[items[j]]
+        if c > m:
+            m = c
+    return m
+
+
+@jit
+def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
+                  boundary, removable, importance, code, n_steps, half, tol):
+    """Remove up to ``n_steps`` points, least important first.
+
+    Mutates the neighbour lists, local meshes, normals and importance in place (for the
+    remaining points). ``removable`` marks the candidates (not boundary, not frozen, alive).
+
+    Returns
+    -------
+    order : int64 (k,)
+        Removed point ids, in removal order.
+    at : float64 (k,)
+        Importance of each at the moment of its removal.
+    pool : the (possibly reallocated) neighbour pool.
+    """
+    n = X.shape[0]
+    hp, pos = heap.new(n)
+    items = np.nonzero(removable)[0]
+    size = heap.build(hp, pos, importance, items)
+    n_steps = min(n_steps, size)
+    order = np.empty(n_steps, dtype=np.int64)
+    at = np.empty(n_steps)
+    stamp = np.zeros(n, dtype=np.int64)
+    mesh_changed = np.zeros(n, dtype=np.bool_)
+    normal_changed = np.zeros(n, dtype=np.bool_)
+    buf = 64
+    link = np.empty(buf, dtype=np.int64)
+    cand = np.empty(3 * buf, dtype=np.int64)
+    bufs = np.empty((4, 3 * buf + 5))
+    lbufs = np.empty((2, 3 * buf + 5), dtype=np.int64)
+    frame = np.empty((3, 3))
+    work = np.empty(buf, dtype=np.int64)
+    fbufs = np.empty((5, buf + 5))
+    mbufs = np.empty((3, buf + 5), dtype=np.int64)
+    newdn = np.empty(MAX_DN, dtype=np.int64)
+    nvec = np.empty(3)
+    wvec = np.empty(3)
+    for step in range(n_steps):
+        p = heap.pop(hp, pos, importance, size)
+        size -= 1
+        order[step] = p
+        at[step] = importance[p]
+        removable[p] = False
+        # -- 1. Voronoi neighbourhoods
+        k = cnt[p]
+        need = k + 2 * max(k, _max_count(cnt, pool[start[p]:start[p] + k], k)) + 8
+        if k > link.size or need > cand.size:
+            link = np.empty(2 * need, dtype=np.int64)
+            cand = np.empty(2 * need, dtype=np.int64)
+            bufs = np.empty((4, 2 * need + 5))
+            lbufs = np.empty((2, 2 * need + 5), dtype=np.int64)
+        k, pool = remove_point(X, p, start, cnt, cap, pool, meta, half, tol, link, cand, bufs,
+                               lbufs, frame)
+        # -- 2. local meshes and normals of the first ring
+        m = _max_count(cnt, link, k)
+        if m + 5 > fbufs.shape[1] or m > work.size:
+            work = np.empty(2 * m + 5, dtype=np.int64)
+            fbufs = np.empty((5, 2 * m + 10))
+            mbufs = np.empty((3, 2 * m + 10), dtype=np.int64)
+        for j in range(k):
+            a = link[j]
+            s = start[a]
+            c = local_mesh(X, a, pool[s:s + cnt[a]], cnt[a], newdn, work, fbufs, mbufs,
+                           nvec, frame[:2])
+            same = c == dn_cnt[a]
+            if same:
+                for i in range(c):
+                    if newdn[i] != dn[a, i]:
+                        same = False
+                        break
+            mesh_changed[a] = not same
+            if not same:
+                for i in range(c):
+                    dn[a, i] = newdn[i]
+                dn_cnt[a] = c
+            # the normal depends on DN_a, and on the reference plane where DN_a is collinear
+            if (not same or nvec[0] != plane_normals[a, 0] or nvec[1] != plane_normals[a, 1]
+                    or nvec[2] != plane_normals[a, 2]):
+                plane_normals[a, 0], plane_normals[a, 1], plane_normals[a, 2] = (
+                    nvec[0], nvec[1], nvec[2])
+                normal_at(X, a, dn[a], c, plane_normals[a], wvec, nvec)
+                if (wvec[0] != normals[a, 0] or wvec[1] != normals[a, 1]
+                        or wvec[2] != normals[a, 2]):
+                    normals[a, 0], normals[a, 1], normals[a, 2] = wvec[0], wvec[1], wvec[2]
+                    normal_changed[a] = True
+        # -- 3. importance of the points whose mesh or whose neighbours' normals changed
+        for j in range(k):
+            a = link[j]
+            if mesh_changed[a] and removable[a] and stamp[a] != step + 1:
+                stamp[a] = step + 1
+                heap.update(hp, pos, importance, a,
+                            importance_of(code, X, normals, boundary, a, dn[a], dn_cnt[a]),
+                            size)
+            if not normal_changed[a]:
+                continue
+            s = start[a]
+            for i in range(cnt[a]):
+                x = pool[s + i]
+                if not removable[x] or stamp[x] == step + 1:
+                    continue
+                uses = False
+                for t in range(dn_cnt[x]):
+                    if dn[x, t] == a:
+                        uses = True
+                        break
+                if uses:
+                    stamp[x] = step + 1
+                    heap.update(hp, pos, importance, x,
+                                importance_of(code, X, normals, boundary, x, dn[x], dn_cnt[x]),
+                                size)
+        for j in range(k):
+            mesh_changed[link[j]] = False
+            normal_changed[link[j]] = False
+    return order, at, pool

@@ -1,0 +1,95 @@
+"""The result of one simplification: kept points, flags, and the full progressive order."""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+
+
+@dataclass
+class SimplifyResult:
+    """What :func:`~tiledsimplify.simplify_points` returns.
+
+    Attributes
+    ----------
+    keep : bool (n,)
+        Points kept at the requested count (boundary and frozen points always are).
+    boundary : bool (n,)
+        Points flagged on or near a sharp edge.
+    normals : float64 (n, 3)
+        Unit normals of the input points (estimated on the full input).
+    rank : int64 (n,)
+        Removal order up to the requested count: 0 = removed first; -1 = kept.
+    importance : float64 (n,)
+        Importance at the moment of removal; NaN for kept points.
+    deviation : float64 (n,)
+        The boundary measure of every point, and ``threshold`` the value it was cut at.
+    order, order_importance : int64 (r,), float64 (r,)
+        The full progressive removal sequence (past the target if ``options.progressive``):
+        point ids and their importance at removal.
+    target : int
+        The requested count; ``count`` the number actually kept; ``reached`` whether they are
+        equal, and ``message`` why not.
+    """
+
+    keep: np.ndarray
+    boundary: np.ndarray
+    normals: np.ndarray
+    rank: np.ndarray
+    importance: np.ndarray
+    deviation: np.ndarray
+    threshold: float
+    order: np.ndarray
+    order_importance: np.ndarray
+    target: int
+    message: str = ""
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def n(self):
+        return int(self.keep.size)
+
+    @property
+    def count(self):
+        return int(np.count_nonzero(self.keep))
+
+    @property
+    def reached(self):
+        return self.count == self.target
+
+    def keep_at(self, ratio=None, *, count=None):
+        """The kept mask at another count, from the recorded order (no recomputation).
+
+        Any count between ``n - len(order)`` (everything removable removed) and ``n`` is
+        exact: the greedy sequence does not depend on where it stops.
+        """
+        target = resolve_target(self.n, ratio, count)
+        floor = self.n - self.order.size
+        if target < floor:
+            raise InputError(
+                f"keep_at: {target} points asked, but only {self.order.size} of {self.n} were "
+                f"removed in this run, so at least {floor} remain. Run simplify_points with "
+                "options.progressive=True (the default) or a smaller target.")
+        keep = np.ones(self.n, dtype=bool)
+        keep[self.order[: self.n - target]] = False
+        return keep
+
+
+def resolve_target(n, ratio, count):
+    """The target count from exactly one of ``ratio`` (0..1] or ``count`` (0..n)."""
+    if (ratio is None) == (count is None):
+        raise InputError("give exactly one of ratio= (fraction of points to keep, in (0, 1]) "
+                         f"or count= (number of points to keep); got ratio={ratio!r}, "
+                         f"count={count!r}.")
+    if ratio is not None:
+        r = float(ratio)
+        if not 0.0 < r <= 1.0:
+            raise InputError(f"ratio must be in (0, 1], got {ratio!r}; use count= for an "
+                             "absolute number of points.")
+        return int(round(r * n))
+    c = int(count)
+    if c != count or not 0 <= c <= n:
+        raise InputError(f"count must be an integer between 0 and the number of points ({n}),"
+                         f" got {count!r}.")
+    return c

@@ -1,0 +1,225 @@
+"""``simplify_points``: Song & Feng's simplification of one in-memory point set.
+
+The public front door of the core: validates and converts once, then chains the paper's steps,
+each in its own module — :mod:`.voronoi` (``VN_p``), :mod:`.local_mesh` (``DN_p``),
+:mod:`.normals`, :mod:`.boundary`, :mod:`.importance` (Eq. (1)) and :mod:`.removal`.
+"""
+
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import BudgetWarning, InputError
+from . import boundary as boundary_mod
+from .importance import MEASURES, all_importance
+from .local_mesh import MAX_DN, all_local_meshes
+from .normals import all_normals
+from .options import SimplifyOptions
+from .removal import remove_points
+from .result import SimplifyResult, resolve_target
+from .voronoi import BOX_FACTOR, TOL_FACTOR, scale_of, voronoi_neighbours
+
+
+def _validate(xyz, frozen):
+    X = np.asarray(xyz)
+    if X.ndim != 2 or X.shape[1] != 3:
+        raise InputError(f"points must be an array of shape (n, 3), got shape {X.shape}.")
+    if not np.issubdtype(X.dtype, np.number) or np.issubdtype(X.dtype, np.complexfloating):
+        raise InputError(f"points must be real numbers, got dtype {X.dtype}.")
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    bad = ~np.isfinite(X).all(axis=1)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise InputError(f"points contain {int(bad.sum())} row(s) with NaN or infinite "
+                         f"coordinates (first at index {first}: {X[first].tolist()}); drop or "
+                         "repair them before simplifying.")
+    n = X.shape[0]
+    if frozen is None:
+        F = np.zeros(n, dtype=bool)
+    else:
+        F = np.asarray(frozen)
+        if F.shape != (n,) or F.dtype != np.bool_:
+            raise InputError(f"frozen must be a boolean mask of shape ({n},), got dtype "
+                             f"{F.dtype} and shape {F.shape}.")
+        F = F.copy()
+    return X, F
+
+
+def _deduplicate(X, frozen):
+    """Group exact duplicates; each group's representative is a frozen member if any, else
+    the lowest index. Returns ``(rep, inverse)``: representative ids, and the group of each."""
+    _, inverse = np.unique(X, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    idx = np.arange(X.shape[0])
+    order = np.lexsort((idx, ~frozen, inverse))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = inverse[order[1:]] != inverse[order[:-1]]
+    rep = order[first]  # sorted by group id
+    return rep, inverse
+
+
+@dataclass
+class Neighbourhoods:
+    """Voronoi neighbours (adjacency lists), local meshes and normals of one point set."""
+
+    start: np.ndarray
+    cnt: np.ndarray
+    cap: np.ndarray
+    pool: np.ndarray
+    meta: np.ndarray
+    dn: np.ndarray
+    dn_cnt: np.ndarray
+    plane_normals: np.ndarray
+    normals: np.ndarray
+    initial_normals: np.ndarray
+    how: str
+
+
+def neighbourhoods(Xu, scale):
+    """Paper steps 1-2 on distinct points ``Xu``: ``VN_p``, ``DN_p`` and normals."""
+    m = Xu.shape[0]
+    (start, cnt, cap, pool, meta), how = voronoi_neighbours(Xu, scale=scale)
+    dn = np.zeros((m, MAX_DN), dtype=np.int64)
+    dn_cnt = np.zeros(m, dtype=np.int64)
+    plane_normals = np.zeros((m, 3))
+    all_local_meshes(Xu, start, cnt, pool, dn, dn_cnt, plane_normals)
+    normals = np.zeros((m, 3))
+    all_normals(Xu, dn, dn_cnt, plane_normals, normals)
+    return Neighbourhoods(start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
+                          normals.copy(), how)
+
+
+def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
+    """Simplify a point cloud, keeping (and flagging) every point on or near a sharp edge.
+
+    Parameters
+    ----------
+    xyz : array_like (n, 3)
+        Point coordinates. Exact duplicates are allowed (the copies are removed first, with
+        importance 0); NaN or infinite coordinates are an error.
+    ratio : float in (0, 1], optional
+        Fraction of the points to keep. Give this or ``count``.
+    count : int, optional
+        Number of points to keep.
+    frozen : bool array (n,), optional
+        Points that are never removed but act as neighbours (a tile's halo).
+    options : SimplifyOptions or dict, optional
+        Algorithm options; the paper's behaviour by default.
+
+    Returns
+    -------
+    SimplifyResult
+        ``keep``, ``boundary``, ``normals``, ``rank``, ``importance`` and the full progressive
+        order (see :class:`SimplifyResult`). If boundary and frozen points alone exceed the
+        target, all of them are kept, ``res.reached`` is False, ``res.message`` says why, and a
+        :class:`~tiledsimplify.errors.BudgetWarning` is issued.
+
+    Notes
+    -----
+    Cost: one 3-D Delaunay triangulation (Qhull) to seed the Voronoi neighbours, then per
+    removed point an exact local update of the neighbourhoods, normals and importance of two
+    rings of points around it (paper §3.3, Fig. 1).
+
+    References
+    ----------
+    Song, H. & Feng, H.-Y., "A point cloud simplification algorithm for mechanical part
+    inspection", in *Information Technology for Balanced Manufacturing Systems*, Springer 2006.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from tiledsimplify import simplify_points
+    >>> rng = np.random.default_rng(0)
+    >>> xyz = rng.random((2000, 3)) * [1, 1, 0.01]
+    >>> res = simplify_points(xyz, ratio=0.25)
+    >>> int(res.keep.sum())
+    500
+    """
+    if options is None:
+        options = SimplifyOptions()
+    elif isinstance(options, dict):
+        options = SimplifyOptions.from_mapping(options)
+    elif not isinstance(options, SimplifyOptions):
+        raise InputError(f"options must be a SimplifyOptions or a dict, got {type(options)}.")
+    X, frozen = _validate(xyz, frozen)
+    n = X.shape[0]
+    target = resolve_target(n, ratio, count)
+    stats = {"n_input": n}
+    clock = time.perf_counter()
+
+    def lap(name):
+        nonlocal clock
+        now = time.perf_counter()
+        stats[f"seconds_{name}"] = now - clock
+        clock = now
+
+    rep, inverse = _deduplicate(X, frozen) if n else (np.empty(0, np.int64), np.empty(0, np.int64))
+    m = rep.size
+    stats["n_duplicates"] = n - m
+    lo = X[rep].min(axis=0) if m else np.zeros(3)
+    hi = X[rep].max(axis=0) if m else np.zeros(3)
+    Xu = np.ascontiguousarray(X[rep] - 0.5 * (lo + hi))
+    D = scale_of(Xu)
+    lap("prepare")
+
+    st = neighbourhoods(Xu, D)
+    stats["neighbours"] = st.how
+    stats["mean_voronoi_degree"] = float(st.cnt.mean()) if m else 0.0
+    stats["mean_local_mesh_degree"] = float(st.dn_cnt.mean()) if m else 0.0
+    lap("neighbours_normals")
+    deviation_u = np.zeros(m)
+    boundary_mod.all_deviations(Xu, st.normals, st.dn, st.dn_cnt, deviation_u)
+    if options.detect_boundary:
+        boundary_u, threshold = boundary_mod.detect(
+            deviation_u, threshold=options.boundary_threshold, k=options.boundary_k,
+            floor=options.boundary_floor)
+    else:
+        boundary_u, threshold = np.zeros(m, dtype=bool), float("inf")
+    lap("boundary")
+    code = MEASURES[options.importance]
+    imp_u = np.zeros(m)
+    all_importance(code, Xu, st.normals, boundary_u, st.dn, st.dn_cnt, imp_u)
+    lap("importance")
+
+    # 5. progressive removal: duplicate copies first (importance 0), then the greedy sequence
+    boundary = boundary_u[inverse]
+    is_rep = np.zeros(n, dtype=bool)
+    is_rep[rep] = True
+    dup_order = np.flatnonzero(~is_rep & ~frozen & ~boundary)
+    removable_u = ~boundary_u & ~frozen[rep]
+    n_remove = n - target
+    steps = int(removable_u.sum()) if options.progressive else max(0, n_remove - dup_order.size)
+    order_u, at_u, st.pool = remove_points(
+        Xu, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
+        st.normals, boundary_u, removable_u.copy(), imp_u, code, steps, BOX_FACTOR * D,
+        TOL_FACTOR * D)
+    lap("removal")
+
+    order = np.concatenate([dup_order, rep[order_u]])
+    order_importance = np.concatenate([np.zeros(dup_order.size), at_u])
+    cut = min(n_remove, order.size)
+    keep = np.ones(n, dtype=bool)
+    keep[order[:cut]] = False
+    rank = np.full(n, -1, dtype=np.int64)
+    rank[order[:cut]] = np.arange(cut)
+    importance = np.full(n, np.nan)
+    importance[order[:cut]] = order_importance[:cut]
+    message = ""
+    if cut < n_remove:
+        n_b = int(boundary.sum())
+        n_f = int(frozen.sum())
+        message = (f"asked to keep {target} of {n} points, but {n - order.size} must be kept "
+                   f"({n_b} boundary, {n_f} frozen, overlapping ones counted once): kept "
+                   f"{n - cut}. Raise the target, or raise options.boundary_threshold to flag "
+                   "fewer boundary points.")
+        warnings.warn(message, BudgetWarning, stacklevel=2)
+    stats["n_boundary"] = int(boundary.sum())
+    stats["threshold"] = threshold
+    normals_u = st.initial_normals
+    return SimplifyResult(
+        keep=keep, boundary=boundary, normals=normals_u[inverse], rank=rank,
+        importance=importance, deviation=deviation_u[inverse], threshold=threshold,
+        order=order, order_importance=order_importance, target=target, message=message,
+        stats=stats)
