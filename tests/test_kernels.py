@@ -84,14 +84,27 @@ def test_adjacency_append_remove_and_growth():
 def test_heap_pops_in_key_order_with_updates():
     rng = np.random.default_rng(2)
     n = 500
-    key = rng.integers(0, 50, n).astype(float)  # many ties: broken by id
+    key = rng.integers(0, 50, n).astype(float)  # many ties: broken by tie, then id
+    tie = rng.integers(0, 5, n).astype(np.uint64)
     h, pos = heap.new(n)
-    size = heap.build(h, pos, key, np.arange(n))
+    size = heap.build(h, pos, key, tie, np.arange(n))
     for i in rng.choice(n, 200, replace=False):
-        heap.update(h, pos, key, i, float(rng.integers(0, 50)), size)
+        heap.update(h, pos, key, tie, i, float(rng.integers(0, 50)), size)
     got = []
     while size:
-        got.append(heap.pop(h, pos, key, size))
+        got.append(heap.pop(h, pos, key, tie, size))
         size -= 1
-    expected = sorted(range(n), key=lambda i: (key[i], i))
+    expected = sorted(range(n), key=lambda i: (key[i], tie[i], i))
     assert got == expected
+
+
+def test_coordinate_hash_depends_on_the_point_only():
+    rng = np.random.default_rng(3)
+    X = rng.random((1000, 3))
+    h = heap.coordinate_hash(X)
+    assert len(np.unique(h)) == 1000
+    perm = rng.permutation(1000)
+    np.testing.assert_array_equal(heap.coordinate_hash(X[perm]), h[perm])
+    # not monotone in the coordinates: no spatial sweep when ties are broken by it
+    order = np.argsort(h)
+    assert abs(np.corrcoef(X[order, 0], np.arange(1000))[0, 1]) < 0.1

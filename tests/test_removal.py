@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tiledsimplify.core import adjacency, boundary, importance
+from tiledsimplify.core import adjacency, boundary, heap, importance
 from tiledsimplify.core.removal import remove_points
 from tiledsimplify.core.simplify import neighbourhoods
 from tiledsimplify.core.voronoi import BOX_FACTOR, TOL_FACTOR, scale_of
@@ -54,7 +54,8 @@ def test_maintained_state_equals_recomputation(kind):
     steps = int(removable.sum()) * 3 // 4
     order, at, st.pool = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, flags, removable.copy(), imp, 0, steps, BOX_FACTOR * D, TOL_FACTOR * D)
+        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), 0, steps,
+        BOX_FACTOR * D, TOL_FACTOR * D)
     assert len(order) == steps == len(set(order.tolist()))
     assert not (flags[order] | frozen[order]).any()
     alive = np.ones(len(X), bool)
@@ -78,6 +79,7 @@ def test_maintained_state_equals_recomputation(kind):
 
 def _naive_greedy(X, flags, frozen, steps, D):
     """Recompute everything from scratch before every removal."""
+    tie = heap.coordinate_hash(X)
     alive = np.ones(len(X), bool)
     order, at = [], []
     for _ in range(steps):
@@ -85,11 +87,11 @@ def _naive_greedy(X, flags, frozen, steps, D):
         st = neighbourhoods(X[keep], D)
         imp = np.zeros(len(keep))
         importance.all_importance(0, X[keep], st.normals, flags[keep], st.dn, st.dn_cnt, imp)
-        cand = [(imp[i], int(keep[i])) for i in range(len(keep))
+        cand = [(imp[i], tie[keep[i]], int(keep[i])) for i in range(len(keep))
                 if not flags[keep[i]] and not frozen[keep[i]]]
         if not cand:
             break
-        v, p = min(cand)
+        v, _, p = min(cand)
         order.append(p)
         at.append(v)
         alive[p] = False
@@ -106,7 +108,8 @@ def test_greedy_order_equals_naive_from_scratch(kind):
     steps = int(removable.sum()) - 5
     order, at, _ = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, flags, removable.copy(), imp, 0, steps, BOX_FACTOR * D, TOL_FACTOR * D)
+        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), 0, steps,
+        BOX_FACTOR * D, TOL_FACTOR * D)
     ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D)
     assert order.tolist() == ref_order
     np.testing.assert_array_equal(at, ref_at)

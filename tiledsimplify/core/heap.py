@@ -1,8 +1,10 @@
 """An indexed binary min-heap over point ids, for the removal queue (paper §3.3).
 
 Keys can be raised or lowered in place, so each removal updates the importance of the affected
-points without piling up stale entries. Ties are broken by the smaller point id, which makes the
-removal order deterministic.
+points without piling up stale entries. Ties are broken by a per-point ``tie`` value (a hash of
+the point's coordinates, see :func:`coordinate_hash`), then by id: deterministic, and without
+the spatial bias of ids — on exactly flat faces Eq. (1) is exactly 0, and breaking those ties by
+id (ids sorted by coordinate) sweeps each face empty from one side.
 """
 
 import numpy as np
@@ -11,19 +13,23 @@ from ._jit import jit
 
 
 @jit
-def _less(key, a, b):
+def _less(key, tie, a, b):
     ka = key[a]
     kb = key[b]
-    return ka < kb or (ka == kb and a < b)
+    if ka != kb:
+        return ka < kb
+    if tie[a] != tie[b]:
+        return tie[a] < tie[b]
+    return a < b
 
 
 @jit
-def _sift_up(heap, pos, key, k):
+def _sift_up(heap, pos, key, tie, k):
     item = heap[k]
     while k > 0:
         parent = (k - 1) >> 1
         other = heap[parent]
-        if _less(key, item, other):
+        if _less(key, tie, item, other):
             heap[k] = other
             pos[other] = k
             k = parent
@@ -34,17 +40,17 @@ def _sift_up(heap, pos, key, k):
 
 
 @jit
-def _sift_down(heap, pos, key, k, size):
+def _sift_down(heap, pos, key, tie, k, size):
     item = heap[k]
     while True:
         child = 2 * k + 1
         if child >= size:
             break
         right = child + 1
-        if right < size and _less(key, heap[right], heap[child]):
+        if right < size and _less(key, tie, heap[right], heap[child]):
             child = right
         other = heap[child]
-        if _less(key, other, item):
+        if _less(key, tie, other, item):
             heap[k] = other
             pos[other] = k
             k = child
@@ -55,31 +61,31 @@ def _sift_down(heap, pos, key, k, size):
 
 
 @jit
-def build(heap, pos, key, items):
+def build(heap, pos, key, tie, items):
     """Heapify ``items`` (point ids) with priorities ``key[items]``; returns the heap size."""
     size = items.size
     for k in range(size):
         heap[k] = items[k]
         pos[items[k]] = k
     for k in range(size // 2 - 1, -1, -1):
-        _sift_down(heap, pos, key, k, size)
+        _sift_down(heap, pos, key, tie, k, size)
     return size
 
 
 @jit
-def update(heap, pos, key, i, value, size):
+def update(heap, pos, key, tie, i, value, size):
     """Set ``key[i] = value`` and restore the heap order (``i`` must be in the heap)."""
     old = key[i]
     key[i] = value
     k = pos[i]
     if value < old:
-        _sift_up(heap, pos, key, k)
+        _sift_up(heap, pos, key, tie, k)
     elif value > old:
-        _sift_down(heap, pos, key, k, size)
+        _sift_down(heap, pos, key, tie, k, size)
 
 
 @jit
-def pop(heap, pos, key, size):
+def pop(heap, pos, key, tie, size):
     """Remove and return the id with the smallest key; the new size is ``size - 1``."""
     top = heap[0]
     pos[top] = -1
@@ -87,8 +93,25 @@ def pop(heap, pos, key, size):
     if size > 0:
         heap[0] = heap[size]
         pos[heap[0]] = 0
-        _sift_down(heap, pos, key, 0, size)
+        _sift_down(heap, pos, key, tie, 0, size)
     return top
+
+
+def coordinate_hash(X):
+    """A 64-bit hash of each row's coordinate bits (splitmix64 mixing): the tie-breaker.
+
+    It depends only on the point itself, so a point breaks ties the same way in every tile.
+    """
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    bits = X.view(np.uint64).reshape(X.shape[0], X.shape[1] if X.ndim == 2 else 1)
+    h = np.zeros(len(X), dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        for j in range(bits.shape[1]):
+            z = h ^ (bits[:, j] + np.uint64(0x9E3779B97F4A7C15))
+            z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+            z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+            h = z ^ (z >> np.uint64(31))
+    return h
 
 
 @jit

@@ -37,11 +37,12 @@ def _max_count(cnt, items, k):
 
 @jit
 def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
-                  boundary, removable, importance, code, n_steps, half, tol):
+                  boundary, removable, importance, tie, code, n_steps, half, tol):
     """Remove up to ``n_steps`` points, least important first.
 
     Mutates the neighbour lists, local meshes, normals and importance in place (for the
-    remaining points). ``removable`` marks the candidates (not boundary, not frozen, alive).
+    remaining points). ``removable`` marks the candidates (not boundary, not frozen, alive);
+    ``tie`` (uint64) breaks importance ties (see :mod:`.heap`).
 
     Returns
     -------
@@ -54,7 +55,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     n = X.shape[0]
     hp, pos = heap.new(n)
     items = np.nonzero(removable)[0]
-    size = heap.build(hp, pos, importance, items)
+    size = heap.build(hp, pos, importance, tie, items)
     n_steps = min(n_steps, size)
     order = np.empty(n_steps, dtype=np.int64)
     at = np.empty(n_steps)
@@ -74,7 +75,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     nvec = np.empty(3)
     wvec = np.empty(3)
     for step in range(n_steps):
-        p = heap.pop(hp, pos, importance, size)
+        p = heap.pop(hp, pos, importance, tie, size)
         size -= 1
         order[step] = p
         at[step] = importance[p]
@@ -126,7 +127,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
             a = link[j]
             if mesh_changed[a] and removable[a] and stamp[a] != step + 1:
                 stamp[a] = step + 1
-                heap.update(hp, pos, importance, a,
+                heap.update(hp, pos, importance, tie, a,
                             importance_of(code, X, normals, boundary, a, dn[a], dn_cnt[a]),
                             size)
             if not normal_changed[a]:
@@ -143,7 +144,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
                         break
                 if uses:
                     stamp[x] = step + 1
-                    heap.update(hp, pos, importance, x,
+                    heap.update(hp, pos, importance, tie, x,
                                 importance_of(code, X, normals, boundary, x, dn[x], dn_cnt[x]),
                                 size)
         for j in range(k):

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import BudgetWarning, InputError
 from . import boundary as boundary_mod
+from .heap import coordinate_hash
 from .importance import MEASURES, all_importance
 from .local_mesh import MAX_DN, all_local_meshes
 from .normals import all_normals
@@ -97,8 +98,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
     Parameters
     ----------
     xyz : array_like (n, 3)
-        Point coordinates. Exact duplicates are allowed (the copies are removed first, with
-        importance 0); NaN or infinite coordinates are an error.
+        Point coordinates. Exact duplicates are allowed: the algorithm runs on one copy (a
+        frozen one if any), the other copies share its flags and normal and are removed first,
+        with importance 0 — unless they are frozen or boundary points, which are always kept.
+        NaN or infinite coordinates are an error.
     ratio : float in (0, 1], optional
         Fraction of the points to keep. Give this or ``count``.
     count : int, optional
@@ -193,8 +196,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
     steps = int(removable_u.sum()) if options.progressive else max(0, n_remove - dup_order.size)
     order_u, at_u, st.pool = remove_points(
         Xu, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, boundary_u, removable_u.copy(), imp_u, code, steps, BOX_FACTOR * D,
-        TOL_FACTOR * D)
+        st.normals, boundary_u, removable_u.copy(), imp_u, coordinate_hash(X[rep]), code, steps,
+        BOX_FACTOR * D, TOL_FACTOR * D)
     lap("removal")
 
     order = np.concatenate([dup_order, rep[order_u]])
