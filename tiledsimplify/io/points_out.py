@@ -1,0 +1,100 @@
+"""Writing simplified points: NPY (structured), PLY (binary) and XYZ/CSV text.
+
+Every writer goes to a temporary file beside the target and renames it at the end, so a failed
+run never leaves a half-written output under the requested name.
+"""
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FileFormatError
+
+SUFFIXES = (".npy", ".ply", ".xyz", ".txt", ".csv")
+
+
+def _table(xyz, columns):
+    n = len(xyz)
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    for name, values in columns.items():
+        values = np.asarray(values)
+        if values.shape != (n,):
+            raise ValueError(f"column {name!r} has shape {values.shape}, expected ({n},)")
+        fields.append((name, values.dtype.newbyteorder("<").str))
+    table = np.empty(n, dtype=fields)
+    table["x"], table["y"], table["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    for name, values in columns.items():
+        table[name] = values
+    return table
+
+
+_PLY_TYPES = {"f8": "double", "f4": "float", "i8": "int64", "i4": "int", "u1": "uchar",
+              "b1": "uchar", "i2": "short", "u2": "ushort", "u4": "uint", "i1": "char"}
+
+
+def _write_ply(fh, table):
+    props = []
+    cast = []
+    for name in table.dtype.names:
+        kind = table.dtype[name].str[1:]
+        if kind == "i8":  # int64 is not a standard PLY type: store as int32
+            cast.append((name, "<i4"))
+            props.append(f"property int {name}")
+        else:
+            cast.append((name, "<" + ("u1" if kind == "b1" else kind)))
+            props.append(f"property {_PLY_TYPES[kind]} {name}")
+    out = np.empty(len(table), dtype=cast)
+    for name, _ in cast:
+        out[name] = table[name]
+    header = ["ply", "format binary_little_endian 1.0", "comment written by tiledsimplify",
+              f"element vertex {len(table)}", *props, "end_header"]
+    fh.write(("\n".join(header) + "\n").encode("ascii"))
+    fh.write(out.tobytes())
+
+
+def _write_text(fh, table, sep):
+    names = table.dtype.names
+    fh.write((sep.join(names) + "\n").encode())
+    cols = [table[n].astype(np.int64) if table.dtype[n].kind in "bi" else table[n]
+            for n in names]
+    fmt = sep.join("%d" if c.dtype.kind == "i" else "%.17g" for c in cols)
+    np.savetxt(fh, np.column_stack(cols) if cols else np.empty((0, 0)), fmt=fmt)
+
+
+def write_points(path, xyz, columns=None):
+    """Write points and per-point columns to ``path``; the format follows the suffix.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.npy`` (a structured array with fields x, y, z and one per column), ``.ply`` (binary
+        little-endian, one vertex property per column), ``.xyz``/``.txt`` (space separated, with
+        a header line) or ``.csv``.
+    xyz : (n, 3) array
+    columns : dict of name -> (n,) array, optional
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise FileFormatError(f"{path}: cannot write '{suffix}' files; use one of "
+                              f"{', '.join(SUFFIXES)}.")
+    table = _table(np.asarray(xyz, dtype=np.float64).reshape(-1, 3), columns or {})
+    directory = path.parent if str(path.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=directory)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            if suffix == ".npy":
+                np.save(fh, table)
+            elif suffix == ".ply":
+                _write_ply(fh, table)
+            else:
+                _write_text(fh, table, "," if suffix == ".csv" else " ")
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
