@@ -1,0 +1,84 @@
+"""The command line and the point writer: formats round-trip, exit codes, no half files."""
+
+import numpy as np
+import pytest
+
+from tiledsimplify.cli import EXIT_BUDGET, EXIT_INPUT, EXIT_OK, main
+from tiledsimplify.errors import FileFormatError
+from tiledsimplify.io import read_points
+from tiledsimplify.io.points_out import write_points
+
+
+@pytest.fixture()
+def cloud(tmp_path):
+    rng = np.random.default_rng(0)
+    xy = rng.random((1200, 2)) * 3
+    X = np.c_[xy, np.sin(xy[:, 0])]
+    path = tmp_path / "in.xyz"
+    np.savetxt(path, X)
+    return X, path
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".ply", ".xyz", ".csv"])
+def test_write_points_round_trips(tmp_path, suffix):
+    rng = np.random.default_rng(1)
+    X = rng.random((50, 3)) * 1000
+    cols = {"sharp_edge": (rng.random(50) > 0.5).astype(np.uint8),
+            "simplify_rank": rng.integers(-1, 100, 50), "importance": rng.random(50)}
+    path = tmp_path / f"out{suffix}"
+    write_points(path, X, cols)
+    np.testing.assert_array_equal(read_points(path), X)
+    if suffix == ".npy":
+        t = np.load(path)
+        np.testing.assert_array_equal(t["simplify_rank"], cols["simplify_rank"])
+        np.testing.assert_array_equal(t["importance"], cols["importance"])
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+def test_failed_write_leaves_nothing(tmp_path, monkeypatch):
+    path = tmp_path / "out.npy"
+
+    def boom(*a, **k):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(np, "save", boom)
+    with pytest.raises(OSError, match="disk full"):
+        write_points(path, np.zeros((3, 3)))
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(FileFormatError, match="cannot write '.las'"):
+        write_points(tmp_path / "out.las", np.zeros((3, 3)))
+
+
+def test_cli_simplifies_and_writes_flags(cloud, tmp_path):
+    X, path = cloud
+    out = tmp_path / "out.npy"
+    assert main(["simplify", str(path), str(out), "--ratio", "0.25", "-q"]) == EXIT_OK
+    t = np.load(out)
+    assert len(t) == 300
+    assert (t["simplify_rank"] == -1).all() and np.isnan(t["importance"]).all()
+    out_all = tmp_path / "all.npy"
+    assert main(["simplify", str(path), str(out_all), "--count", "300", "--all-points",
+                 "-q"]) == EXIT_OK
+    t_all = np.load(out_all)
+    assert len(t_all) == 1200 and (t_all["simplify_rank"] >= 0).sum() == 900
+
+
+def test_cli_exit_codes(cloud, tmp_path, caplog):
+    X, path = cloud
+    out = tmp_path / "out.ply"
+    assert main(["simplify", str(tmp_path / "missing.ply"), str(out), "--ratio", "0.5"]) \
+        == EXIT_INPUT
+    assert "missing.ply" in caplog.text
+    assert main(["simplify", str(path), str(out), "--ratio", "2"]) == EXIT_INPUT
+    assert "ratio" in caplog.text
+    bad = tmp_path / "bad.xyz"
+    bad.write_text("1 2 3\n4 five 6\n")
+    assert main(["simplify", str(bad), str(out), "--ratio", "0.5"]) == EXIT_INPUT
+    assert "bad.xyz" in caplog.text
+    # every point flagged as boundary: the count cannot be reached, the file is still written
+    assert main(["simplify", str(path), str(out), "--ratio", "0.1",
+                 "--boundary-threshold", "0"]) == EXIT_BUDGET
+    assert len(read_points(out)) > 120
+    assert not (tmp_path / "missing.ply").exists()
+    with pytest.raises(SystemExit):
+        main(["simplify", str(path), str(out)])  # neither --ratio nor --count
