@@ -54,7 +54,7 @@ def test_maintained_state_equals_recomputation(kind):
     steps = int(removable.sum()) * 3 // 4
     order, at, st.pool = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), 0, steps,
+        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), 0, 0, 0.0, steps,
         BOX_FACTOR * D, TOL_FACTOR * D)
     assert len(order) == steps == len(set(order.tolist()))
     assert not (flags[order] | frozen[order]).any()
@@ -108,7 +108,7 @@ def test_greedy_order_equals_naive_from_scratch(kind):
     steps = int(removable.sum()) - 5
     order, at, _ = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), 0, steps,
+        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), 0, 0, 0.0, steps,
         BOX_FACTOR * D, TOL_FACTOR * D)
     ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D)
     assert order.tolist() == ref_order

@@ -192,3 +192,25 @@ def test_bunny_at_paper_ratio(data_dir):
     from scipy.spatial import cKDTree
     d, _ = cKDTree(X[res.keep]).query(X)
     assert d.max() < 0.15 * np.linalg.norm(X.max(0) - X.min(0))
+
+
+def test_max_spacing_guard_keeps_a_density_floor():
+    from scipy.spatial import cKDTree
+    rng = np.random.default_rng(7)
+    plate = np.c_[rng.random((3000, 2)) * 10, np.zeros(3000)]  # Eq. (1) is 0 everywhere
+    h = 0.6
+    with pytest.warns(BudgetWarning, match="vetoed by the max_spacing guard"):
+        res = simplify_points(plate, count=30,
+                              options=SimplifyOptions(guard="max_spacing", max_spacing=h))
+    kept = plate[res.keep]
+    assert not res.reached and len(kept) > 30
+    # a point is kept only when no remaining point was within h: kept points are h apart
+    d, _ = cKDTree(kept).query(kept, k=2)
+    assert d[:, 1].min() > h
+    # and the plate is still covered: no hole much wider than h
+    d, _ = cKDTree(kept).query(plate)
+    assert d.max() < 2 * h
+    # without the guard the same request empties the plate down to 30 points
+    assert simplify_points(plate, count=30).count == 30
+    with pytest.raises(InputError, match="max_spacing"):
+        SimplifyOptions(guard="max_spacing")

@@ -5,6 +5,7 @@ from dataclasses import dataclass, fields
 from ..errors import InputError
 from .boundary import FLOOR, K_SIGMA
 from .importance import MEASURES
+from .removal import GUARDS
 
 MODES = ("paper",)
 
@@ -28,6 +29,12 @@ class SimplifyOptions:
         Automatic threshold: robust standard deviations above the median.
     boundary_floor : float
         Automatic threshold: lower bound (radians).
+    guard : {"none", "max_spacing"}
+        A rule that can veto a removal (see :mod:`tiledsimplify.core.removal`). Vetoed
+        points are kept; if that makes the target unreachable the result says so.
+    max_spacing : float or None
+        For ``guard="max_spacing"``: a point is removed only while a remaining neighbour lies
+        within this distance (model units).
     progressive : bool
         Keep removing past the target (recording rank and importance) until only boundary and
         frozen points remain, so :meth:`SimplifyResult.keep_at` can answer any coarser count.
@@ -40,6 +47,8 @@ class SimplifyOptions:
     boundary_threshold: float | None = None
     boundary_k: float = K_SIGMA
     boundary_floor: float = FLOOR
+    guard: str = "none"
+    max_spacing: float | None = None
     progressive: bool = True
 
     def __post_init__(self):
@@ -51,6 +60,12 @@ class SimplifyOptions:
         if self.boundary_threshold is not None and not self.boundary_threshold >= 0:
             raise InputError("options.boundary_threshold must be a non-negative number or None,"
                              f" got {self.boundary_threshold!r}.")
+        if self.guard not in GUARDS:
+            raise InputError(f"options.guard must be one of {tuple(GUARDS)}, got {self.guard!r}.")
+        if self.guard == "max_spacing" and not (
+                self.max_spacing is not None and self.max_spacing > 0):
+            raise InputError("options.guard='max_spacing' needs options.max_spacing, a positive "
+                             f"distance in model units; got {self.max_spacing!r}.")
         if not self.boundary_k > 0:
             raise InputError(f"options.boundary_k must be positive, got {self.boundary_k!r}.")
         if not self.boundary_floor >= 0:

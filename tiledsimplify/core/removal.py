@@ -10,10 +10,13 @@ changes (Fig. 1):
 3. the importance of every point whose local mesh changed, and of every point with a neighbour
    whose normal changed (the second ring: points ``x`` with ``a ∈ DN_x``, found in ``VN_a``).
 
-Boundary and frozen points are never removed but stay in every neighbourhood. The removal order
+Boundary and frozen points are never removed but stay in every neighbourhood. A guard rule
+(:data:`GUARDS`) may veto a removal; the vetoed point is then kept. The removal order
 and the importance at removal are recorded for every step, so one run answers every coarser
 count (and a tiled run can cut all tiles at one importance level).
 """
+
+import math
 
 import numpy as np
 
@@ -23,6 +26,31 @@ from .importance import importance_of
 from .local_mesh import MAX_DN, local_mesh
 from .normals import normal_at
 from .voronoi import remove_point
+
+
+#: name -> code of the guard rules the removal loop knows
+GUARDS = {"none": 0, "max_spacing": 1}
+
+
+@jit
+def guard_allows(guard, value, X, p, start, cnt, pool):
+    """May ``p`` be removed now?
+
+    ``none`` (0): always. ``max_spacing`` (1): only if a remaining Voronoi neighbour lies within
+    ``value`` (model units) — the loop then thins dense regions down to a spacing of about
+    ``value`` but never isolates a point; like Poisson-disk elimination, a floor on density.
+    """
+    if guard == 0:
+        return True
+    s = start[p]
+    best = math.inf
+    for j in range(cnt[p]):
+        q = pool[s + j]
+        dx, dy, dz = X[q, 0] - X[p, 0], X[q, 1] - X[p, 1], X[q, 2] - X[p, 2]
+        d = dx * dx + dy * dy + dz * dz
+        if d < best:
+            best = d
+    return best <= value * value
 
 
 @jit
@@ -37,12 +65,14 @@ def _max_count(cnt, items, k):
 
 @jit
 def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
-                  boundary, removable, importance, tie, code, n_steps, half, tol):
+                  boundary, removable, importance, tie, code, guard, guard_value, n_steps, half,
+                  tol):
     """Remove up to ``n_steps`` points, least important first.
 
     Mutates the neighbour lists, local meshes, normals and importance in place (for the
     remaining points). ``removable`` marks the candidates (not boundary, not frozen, alive);
-    ``tie`` (uint64) breaks importance ties (see :mod:`.heap`).
+    ``tie`` (uint64) breaks importance ties (see :mod:`.heap`). ``guard`` / ``guard_value``
+    select a guard rule (:data:`GUARDS`) that can veto a removal; a vetoed point is kept.
 
     Returns
     -------
@@ -74,12 +104,17 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     newdn = np.empty(MAX_DN, dtype=np.int64)
     nvec = np.empty(3)
     wvec = np.empty(3)
-    for step in range(n_steps):
+    step = 0
+    vetoed = 0
+    while step < n_steps and size > 0:
         p = heap.pop(hp, pos, importance, tie, size)
         size -= 1
+        removable[p] = False
+        if not guard_allows(guard, guard_value, X, p, start, cnt, pool):
+            vetoed += 1  # kept for good: removals only make the neighbourhood sparser
+            continue
         order[step] = p
         at[step] = importance[p]
-        removable[p] = False
         # -- 1. Voronoi neighbourhoods
         k = cnt[p]
         need = k + 2 * max(k, _max_count(cnt, pool[start[p]:start[p] + k], k)) + 8
@@ -150,4 +185,5 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
         for j in range(k):
             mesh_changed[link[j]] = False
             normal_changed[link[j]] = False
-    return order, at, pool
+        step += 1
+    return order[:step], at[:step], pool

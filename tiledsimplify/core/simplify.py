@@ -18,7 +18,7 @@ from .importance import MEASURES, all_importance
 from .local_mesh import MAX_DN, all_local_meshes
 from .normals import all_normals
 from .options import SimplifyOptions
-from .removal import remove_points
+from .removal import GUARDS, remove_points
 from .result import SimplifyResult, resolve_target
 from .voronoi import BOX_FACTOR, TOL_FACTOR, scale_of, voronoi_neighbours
 
@@ -196,8 +196,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
     steps = int(removable_u.sum()) if options.progressive else max(0, n_remove - dup_order.size)
     order_u, at_u, st.pool = remove_points(
         Xu, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, boundary_u, removable_u.copy(), imp_u, coordinate_hash(X[rep]), code, steps,
-        BOX_FACTOR * D, TOL_FACTOR * D)
+        st.normals, boundary_u, removable_u.copy(), imp_u, coordinate_hash(X[rep]), code,
+        GUARDS[options.guard], float(options.max_spacing or 0.0), steps, BOX_FACTOR * D,
+        TOL_FACTOR * D)
     lap("removal")
 
     order = np.concatenate([dup_order, rep[order_u]])
@@ -213,10 +214,13 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
     if cut < n_remove:
         n_b = int(boundary.sum())
         n_f = int(frozen.sum())
+        n_g = n - order.size - int((boundary | frozen).sum())
         message = (f"asked to keep {target} of {n} points, but {n - order.size} must be kept "
-                   f"({n_b} boundary, {n_f} frozen, overlapping ones counted once): kept "
-                   f"{n - cut}. Raise the target, or raise options.boundary_threshold to flag "
-                   "fewer boundary points.")
+                   f"({n_b} boundary, {n_f} frozen, overlapping ones counted once"
+                   + (f"; {n_g} vetoed by the {options.guard} guard" if n_g else "")
+                   + f"): kept {n - cut}. Raise the target, or raise "
+                   "options.boundary_threshold to flag fewer boundary points"
+                   + (", or raise options.max_spacing" if n_g else "") + ".")
         warnings.warn(message, BudgetWarning, stacklevel=2)
     stats["n_boundary"] = int(boundary.sum())
     stats["threshold"] = threshold
