@@ -274,13 +274,15 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, link, cand, bufs,
             b = link[ib]
             if adjacency.contains(start, cnt, pool, a, b):
                 continue
-            # constraints: the current neighbours of a, and the whole former link of p
+            # constraints: the whole former link of p, then the current neighbours of a. Most
+            # pairs have no facet, and the points that block one are mostly in the link: first
+            # come, the clipped polygon empties after a few constraints.
             sa = start[a]
             na = cnt[a]
-            for j in range(na):
-                cand[j] = pool[sa + j]
             for j in range(k):
-                cand[na + j] = link[j]
+                cand[j] = link[j]
+            for j in range(na):
+                cand[k + j] = pool[sa + j]
             if facet_positive(X, a, b, cand, na + k, half, tol,
                               bufs[0], bufs[1], lbufs[0], bufs[2], bufs[3], lbufs[1], frame):
                 pool = adjacency.append(start, cnt, cap, pool, meta, a, b)

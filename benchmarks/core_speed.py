@@ -1,0 +1,105 @@
+"""Speed and memory of the in-memory core against the library calls it is built from.
+
+Each case runs in its own process (peak RSS is per process). Peers timed in the same process:
+scipy's Qhull 3-D Delaunay and a cKDTree 17-nearest query on the same points — the two library
+calls a per-point neighbourhood method cannot avoid — so the table reads as ratios that hold
+across machines. The JIT is warmed first. Clouds:
+
+* ``scan``: Fandisk seen by the project's line scanner (3 views, lines 4x sparser than samples
+  along a line, noise 0.1 x spacing) — a realistic scan of a machined part;
+* ``bunny``: the ten real Stanford Bunny range scans registered with ``bun.conf`` (362,272
+  points), subsampled;
+* ``flat``: Fandisk sampled exactly on its faces (no noise): Eq. (1) is exactly 0 on the flat
+  faces, the paper's rule empties them and the points around an emptied face become Voronoi
+  neighbours of each other — the worst case for the removal loop (see README).
+
+    python benchmarks/core_speed.py                        # default cases
+    python benchmarks/core_speed.py scan:100000 bunny:300000
+"""
+
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+def cloud(kind, n):
+    from tiledsimplify.io import read_mesh, read_points
+    from tiledsimplify.synthetic import sample_surface, scan, spacing
+    if kind == "bunny":
+        from scipy.spatial.transform import Rotation
+        scans = DATA / "scans" / "stanford_bunny_range"
+        parts = []
+        for line in (scans / "bun.conf").read_text().splitlines():
+            f = line.split()
+            if f and f[0] == "bmesh":
+                t, q = np.array(f[2:5], float), np.array(f[5:9], float)
+                P = read_points(scans / (f[1] + ".gz"))
+                parts.append(Rotation.from_quat(q).inv().apply(P) + t)
+        P = np.vstack(parts)
+        rng = np.random.default_rng(0)
+        return P[np.sort(rng.choice(len(P), min(n, len(P)), replace=False))]
+    V, F = read_mesh(DATA / "meshes" / "cad_classic" / "fandisk.obj")
+    if kind == "flat":
+        return sample_surface(V, F, n, seed=0)[0]
+    P, _ = scan(V, F, n_points=n, seed=0)
+    noise = 0.1 * spacing(P)
+    return scan(V, F, n_points=n, noise=noise, seed=0)[0]
+
+
+def one(kind, n):
+    from scipy.spatial import Delaunay, cKDTree
+
+    from tiledsimplify import SimplifyOptions, simplify_points
+    simplify_points(cloud("flat", 2000), ratio=0.2)  # warm the JIT
+    X = cloud(kind, n)
+    n = len(X)
+    t = time.perf_counter()
+    Delaunay(X - X.mean(0), qhull_options="Qbb Qc Qz Q12")
+    t_qhull = time.perf_counter() - t
+    t = time.perf_counter()
+    cKDTree(X).query(X, k=17)
+    t_knn = time.perf_counter() - t
+    t = time.perf_counter()
+    res = simplify_points(X, ratio=0.2, options=SimplifyOptions(progressive=False))
+    t_core = time.perf_counter() - t
+    t = time.perf_counter()
+    simplify_points(X, ratio=0.2)
+    t_prog = time.perf_counter() - t
+    st = res.stats
+    return {"case": kind, "n": n, "qhull": t_qhull, "knn17": t_knn, "core": t_core, "progressive": t_prog,
+            "neighbours": st["seconds_neighbours_normals"], "removal": st["seconds_removal"],
+            "boundary": st["n_boundary"],
+            "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def main(cases):
+    rows = []
+    for case in cases:
+        kind, n = case.split(":")
+        out = subprocess.run([sys.executable, __file__, "--one", kind, n], check=True,
+                             capture_output=True, text=True).stdout
+        rows.append(json.loads(out.strip().splitlines()[-1]))
+    print("| cloud | points | core s | µs/pt | pts/s | neighbours s | removal s | progressive s "
+          "| Qhull s | kNN-17 s | core / Qhull | peak RSS MB |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in rows:
+        n = r["n"]
+        print(f"| {r['case']} | {n:,} | {r['core']:.2f} | {1e6 * r['core'] / n:.0f} | {n / r['core']:,.0f} "
+              f"| {r['neighbours']:.2f} | {r['removal']:.2f} | {r['progressive']:.2f} "
+              f"| {r['qhull']:.2f} | {r['knn17']:.2f} | {r['core'] / r['qhull']:.1f}x "
+              f"| {r['rss_mb']:.0f} |")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 4 and sys.argv[1] == "--one":
+        print(json.dumps(one(sys.argv[2], int(sys.argv[3]))))
+    else:
+        main(sys.argv[1:] or ["scan:10000", "scan:30000", "scan:100000", "bunny:30000",
+                              "bunny:100000", "flat:10000", "flat:30000"])
