@@ -200,6 +200,34 @@ def solve_small(A, b, n):
     return True
 
 
+@jit
+def covariance_about(X, p, idx, k):
+    """Covariance (c00, c01, c02, c11, c12, c22) of ``p`` and the points ``idx[:k]``.
+
+    Offsets are taken from ``p`` before summing, so the result keeps its precision far from the
+    origin (LAS coordinates).
+    """
+    px, py, pz = X[p, 0], X[p, 1], X[p, 2]
+    sx = sy = sz = 0.0
+    sxx = sxy = sxz = syy = syz = szz = 0.0
+    for j in range(k):
+        q = idx[j]
+        x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
+        sx += x
+        sy += y
+        sz += z
+        sxx += x * x
+        sxy += x * y
+        sxz += x * z
+        syy += y * y
+        syz += y * z
+        szz += z * z
+    cnt = k + 1.0
+    mx, my, mz = sx / cnt, sy / cnt, sz / cnt
+    return (sxx / cnt - mx * mx, sxy / cnt - mx * my, sxz / cnt - mx * mz,
+            syy / cnt - my * my, syz / cnt - my * mz, szz / cnt - mz * mz)
+
+
 def smallest_axis_numpy(cov):
     """Reference (numpy) twin of :func:`smallest_axis` for tests: eigh per matrix."""
     w, v = np.linalg.eigh(cov)

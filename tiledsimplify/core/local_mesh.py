@@ -32,7 +32,7 @@ import numpy as np
 
 from ._jit import jit
 from .clip import clip, square
-from .linalg import smallest_axis, sym3_eigvals, tangent_basis
+from .linalg import covariance_about, smallest_axis, sym3_eigvals, tangent_basis
 
 #: neighbours used for the reference plane, at least
 MIN_PLANE = 6
@@ -138,30 +138,8 @@ def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame):
             break
     px, py, pz = X[p, 0], X[p, 1], X[p, 2]
     # 2. reference plane from the nearest, non-collinear neighbours (p included)
-    kbest = _plane_size(X, p, idx, d2, m)
-    sx = sy = sz = 0.0
-    sxx = sxy = sxz = syy = syz = szz = 0.0
-    for j in range(kbest):
-        q = idx[j]
-        x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
-        sx += x
-        sy += y
-        sz += z
-        sxx += x * x
-        sxy += x * y
-        sxz += x * z
-        syy += y * y
-        syz += y * z
-        szz += z * z
-    k = kbest
-    cnt = kbest + 1.0
-    mx, my, mz = sx / cnt, sy / cnt, sz / cnt
-    c00 = sxx / cnt - mx * mx
-    c01 = sxy / cnt - mx * my
-    c02 = sxz / cnt - mx * mz
-    c11 = syy / cnt - my * my
-    c12 = syz / cnt - my * mz
-    c22 = szz / cnt - mz * mz
+    k = _plane_size(X, p, idx, d2, m)
+    c00, c01, c02, c11, c12, c22 = covariance_about(X, p, idx, k)
     t1 = frame[0]
     t2 = frame[1]
     smallest_axis(c00, c01, c02, c11, c12, c22, normal0, t1)

@@ -9,7 +9,7 @@ neighbours ``DN_p``; where those are nearly collinear, the reference-plane norma
 import numpy as np
 
 from ._jit import jit
-from .linalg import orient_canonical, smallest_axis
+from .linalg import covariance_about, orient_canonical, smallest_axis
 from .local_mesh import SPREAD
 
 
@@ -21,29 +21,7 @@ def normal_at(X, p, dn, c, fallback, out, work):
     ``SPREAD`` of the largest): at the open border of a scan the one-ring can be a few points
     along the border, whose least-variance direction is arbitrary around the border line.
     """
-    px, py, pz = X[p, 0], X[p, 1], X[p, 2]
-    sx = sy = sz = 0.0
-    sxx = sxy = sxz = syy = syz = szz = 0.0
-    for k in range(c):
-        q = dn[k]
-        x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
-        sx += x
-        sy += y
-        sz += z
-        sxx += x * x
-        sxy += x * y
-        sxz += x * z
-        syy += y * y
-        syz += y * z
-        szz += z * z
-    cnt = c + 1.0
-    mx, my, mz = sx / cnt, sy / cnt, sz / cnt
-    c00 = sxx / cnt - mx * mx
-    c01 = sxy / cnt - mx * my
-    c02 = sxz / cnt - mx * mz
-    c11 = syy / cnt - my * my
-    c12 = syz / cnt - my * mz
-    c22 = szz / cnt - mz * mz
+    c00, c01, c02, c11, c12, c22 = covariance_about(X, p, dn, c)
     l0, l1, l2 = smallest_axis(c00, c01, c02, c11, c12, c22, out, work)
     if c < 2 or l1 <= SPREAD * l2:
         out[0], out[1], out[2] = fallback[0], fallback[1], fallback[2]
