@@ -43,3 +43,7 @@ def _set_cache_dir():
 _set_cache_dir()
 
 jit = numba.njit(cache=True, nogil=True)
+
+#: for small kernels called in the innermost loops: inlined into the caller at numba's IR level
+#: (a call passing a dozen arrays costs more than a clip step itself)
+jit_inline = numba.njit(cache=True, nogil=True, inline="always")

@@ -8,7 +8,7 @@ a full pool doubles. Order inside a block is not meaningful.
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 
 
 def from_edges(n, edges, slack=8):
@@ -44,7 +44,7 @@ def to_sets(start, cnt, pool, alive=None):
     return out
 
 
-@jit
+@jit_inline
 def contains(start, cnt, pool, i, j):
     """True if ``j`` is in the list of ``i``."""
     s = start[i]
@@ -54,7 +54,7 @@ def contains(start, cnt, pool, i, j):
     return False
 
 
-@jit
+@jit_inline
 def remove(start, cnt, pool, i, j):
     """Remove ``j`` from the list of ``i`` (swap with the last entry). True if it was there."""
     s = start[i]

@@ -11,10 +11,10 @@ Sutherland & Hodgman, "Reentrant polygon clipping", CACM 17(1), 1974, specialise
 polygons and one half-plane at a time.
 """
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 
 
-@jit
+@jit_inline
 def square(half, xs, ys, labels):
     """Write the square ``[-half, half]^2`` (counter-clockwise, edges labelled -1); return 4."""
     xs[0], ys[0] = -half, -half
@@ -26,7 +26,7 @@ def square(half, xs, ys, labels):
     return 4
 
 
-@jit
+@jit_inline
 def clip(n, xs, ys, labels, gx, gy, h, label, ox, oy, olabels):
     """Clip the convex polygon ``(xs, ys)[:n]`` to ``gx*x + gy*y <= h``.
 
@@ -71,7 +71,7 @@ def clip(n, xs, ys, labels, gx, gy, h, label, ox, oy, olabels):
     return m
 
 
-@jit
+@jit_inline
 def area(n, xs, ys):
     """Signed area of the polygon ``(xs, ys)[:n]`` (positive when counter-clockwise)."""
     s = 0.0

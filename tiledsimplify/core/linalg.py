@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 
 
 @jit
@@ -105,7 +105,7 @@ def sym3_eigvec(a00, a01, a02, a11, a12, a22, lam, out):
     return True
 
 
-@jit
+@jit_inline
 def any_perpendicular(vx, vy, vz, out):
     """A unit vector perpendicular to (vx, vy, vz), written to ``out``."""
     ax, ay, az = abs(vx), abs(vy), abs(vz)
