@@ -1,0 +1,393 @@
+"""Tests for tiledsimplify.io.las: LAS/LAZ files, chunked reading, streaming LasOutput."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+laspy = pytest.importorskip("laspy")
+
+from laspy.vlrs.vlrlist import VLRList  # noqa: E402
+
+from tiledsimplify.errors import FileFormatError, InputError  # noqa: E402
+from tiledsimplify.io.las import (  # noqa: E402
+    SIMPLIFY_DIMS, LasOutput, LasSource, las_files, write_las,
+)
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+LIDAR = DATA / "lidar"
+
+AUTZEN = "autzen_trim.laz"        # LAS 1.2, point format 3, 110,000 points
+LONE_STAR = "lone-star.laz"       # LAS 1.1, point format 1, 518,862 points
+EXTRA = "las_with_several_extra_byte_bloc.laz"  # LAS 1.4, PF 8, 697,721 points, 2 EB VLRs
+COUNTS = {AUTZEN: 110_000, LONE_STAR: 518_862, EXTRA: 697_721}
+CHUNK = 77_777  # divides none of the counts
+
+
+def lidar_file(name: str) -> Path:
+    path = LIDAR / name
+    if not path.is_file():
+        pytest.skip(f"test data {path} not found")
+    return path
+
+
+_CACHE: dict = {}
+
+
+def chunked(name: str):
+    """(source, list of (start, xyz, attrs)) read once per test session with CHUNK."""
+    if name not in _CACHE:
+        src = LasSource(lidar_file(name), chunk_points=CHUNK)
+        _CACHE[name] = (src, list(src.chunks()))
+    return _CACHE[name]
+
+
+def whole(name: str):
+    src, parts = chunked(name)
+    xyz = np.concatenate([p[1] for p in parts])
+    attrs = {k: np.concatenate([p[2][k] for p in parts]) for k in src.attribute_names}
+    return src, xyz, attrs
+
+
+def small_las(path: Path, name: str, sl: slice, *, offsets=None) -> np.ndarray:
+    """Write points ``sl`` of a data file to ``path`` with laspy; return their xyz."""
+    las = laspy.read(lidar_file(name))
+    xyz = np.c_[las.x[sl], las.y[sl], las.z[sl]]
+    out = laspy.LasData(las.header)
+    out.points = las.points[sl]
+    if offsets is not None:
+        out.change_scaling(offsets=offsets)
+    out.write(path)
+    return xyz
+
+
+def vlr_payloads(vlrs):
+    keep = []
+    for v in vlrs:
+        if type(v).__name__ in ("LasZipVlr", "ExtraBytesVlr"):
+            continue
+        keep.append((v.user_id, v.record_id, bytes(v.record_data_bytes())))
+    return keep
+
+
+# --------------------------------------------------------------------------------------
+# description from the headers
+# --------------------------------------------------------------------------------------
+
+def test_description_from_headers():
+    src = LasSource(lidar_file(AUTZEN))
+    assert src.count == len(src) == 110_000
+    assert src.point_format_id == 3 and src.version == "1.2"
+    assert np.allclose(src.scales, 0.01) and np.allclose(src.offsets, 0)
+    mins, maxs = src.bounds
+    assert np.allclose(mins, [636001.76, 848935.20, 406.26])
+    assert np.allclose(maxs, [637179.22, 849497.90, 520.51])
+    assert src.crs.startswith('PROJCS["NAD_1983_HARN_Lambert_Conformal_Conic"')  # WKT, no EPSG
+    assert src.dimension_names[:3] == ("X", "Y", "Z") and "red" in src.dimension_names
+    assert "X" not in src.attribute_names and "gps_time" in src.attribute_names
+    assert src.extra_dimension_names == ()
+
+    lone = LasSource(lidar_file(LONE_STAR))
+    assert (lone.count, lone.point_format_id, lone.version) == (518_862, 1, "1.1")
+    assert lone.crs == "EPSG:4326"  # what the GeoTIFF keys say (coordinates look like UTM)
+
+    extra = LasSource(lidar_file(EXTRA))
+    assert (extra.count, extra.point_format_id, extra.version) == (697_721, 8, "1.4")
+    assert extra.crs == "EPSG:2154"
+    # two Extra Bytes VLRs: laspy alone would call the second "ExtraBytes"
+    assert extra.extra_dimension_names == ("Deviation", "confidence")
+    assert extra.infos[0].extra_dimensions[1] == ("confidence", "uint8", "confidence values")
+
+
+# --------------------------------------------------------------------------------------
+# chunked reading
+# --------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", [AUTZEN, LONE_STAR, EXTRA])
+def test_chunked_read_equals_whole_read(name):
+    src, parts = chunked(name)
+    starts = [p[0] for p in parts]
+    sizes = [len(p[1]) for p in parts]
+    assert starts == list(np.cumsum([0] + sizes[:-1]))
+    assert sum(sizes) == COUNTS[name] and max(sizes) == CHUNK and sizes[-1] < CHUNK
+
+    las = laspy.read(lidar_file(name))  # the whole file in one go, by laspy itself
+    _, xyz, attrs = whole(name)
+    assert xyz.dtype == np.float64 and xyz.shape == (COUNTS[name], 3)
+    np.testing.assert_array_equal(xyz, np.c_[las.x, las.y, las.z])
+    assert set(attrs) == set(src.attribute_names)
+    raw = las.points.array  # laspy's names differ only for the merged extra bytes
+    for dim in las.point_format.dimension_names:
+        if dim in ("X", "Y", "Z") or dim == "ExtraBytes":
+            continue
+        np.testing.assert_array_equal(attrs[dim], np.array(las[dim]), err_msg=dim)
+    if name == EXTRA:
+        np.testing.assert_array_equal(attrs["confidence"], raw["ExtraBytes"].reshape(-1))
+        assert set(np.unique(attrs["confidence"])) <= {1, 2, 5, 6, 9, 65}
+
+    one = LasSource(lidar_file(name), chunk_points=10**7)
+    (start, xyz1, attrs1), = list(one.chunks())
+    assert start == 0
+    np.testing.assert_array_equal(xyz1, xyz)
+    for dim in attrs:
+        np.testing.assert_array_equal(attrs1[dim], attrs[dim], err_msg=dim)
+
+
+def test_folder_and_glob_read_as_one_cloud(tmp_path):
+    folder = tmp_path / "tiles"
+    folder.mkdir()
+    a = small_las(folder / "a.las", AUTZEN, slice(0, 1000))
+    # different offsets in the second file: coordinates still come back as the same floats
+    b = small_las(folder / "b.LAS", AUTZEN, slice(1000, 2500), offsets=[636000.0, 848900.0, 400.0])
+    (folder / "notes.txt").write_text("not a point cloud")
+    expected = np.concatenate([a, b])
+
+    for spec in (folder, str(folder / "*.[lL][aA][sS]"), [folder / "a.las", folder / "b.LAS"]):
+        assert [p.name for p in las_files(spec)] == ["a.las", "b.LAS"]
+        src = LasSource(spec, chunk_points=700)
+        assert src.count == 2500
+        parts = list(src.chunks())
+        assert [p[0] for p in parts] == [0, 700, 1000, 1700, 2400]  # chunks stop at file ends
+        xyz = np.concatenate([p[1] for p in parts])
+        np.testing.assert_allclose(xyz, expected, rtol=0, atol=1e-9)
+        src.template_header()  # same point format and dimensions: writable
+    mins, maxs = LasSource(folder).bounds
+    np.testing.assert_allclose(mins, expected.min(axis=0))
+    np.testing.assert_allclose(maxs, expected.max(axis=0))
+
+
+def test_mixed_point_formats_read_but_do_not_write(tmp_path):
+    small_las(tmp_path / "a.las", AUTZEN, slice(0, 300))      # PF 3 (with RGB)
+    small_las(tmp_path / "b.las", LONE_STAR, slice(0, 200))   # PF 1
+    with pytest.warns(UserWarning, match="different CRS"):
+        src = LasSource(tmp_path)
+    assert "red" not in src.attribute_names and "gps_time" in src.attribute_names
+    xyz, attrs = src.read_all()
+    assert len(xyz) == 500 and all(len(v) == 500 for v in attrs.values())
+    with pytest.raises(FileFormatError, match=r"b\.las.*a\.las.*PDAL|b\.las.*a\.las.*pdal"):
+        src.template_header()
+
+
+# --------------------------------------------------------------------------------------
+# writing
+# --------------------------------------------------------------------------------------
+
+def new_dims(n: int, start: int):
+    rank = np.arange(start, start + n, dtype=np.int64)
+    rank[::5] = -1
+    importance = np.sin(rank.astype(np.float64))
+    importance[rank < 0] = np.nan
+    return {"sharp_edge": (rank % 3 == 0).astype(np.uint8), "importance": importance,
+            "simplify_rank": rank}
+
+
+@pytest.mark.parametrize("suffix", [".laz", ".las"])
+@pytest.mark.parametrize("name", [AUTZEN, LONE_STAR, EXTRA])
+def test_round_trip(tmp_path, name, suffix):
+    src, xyz, attrs = whole(name)
+    sel = np.arange(0, len(xyz), 7)
+    sub_xyz = xyz[sel]
+    sub = {k: v[sel] for k, v in attrs.items()}
+    extra = new_dims(len(sel), 0)
+    out_path = tmp_path / f"out{suffix}"
+    cuts = [0, len(sel) // 3, len(sel) // 3 * 2 + 17, len(sel)]
+    with LasOutput(out_path, src.template_header()) as out:
+        for lo, hi in zip(cuts[:-1], cuts[1:]):
+            out.write(sub_xyz[lo:hi], {k: v[lo:hi] for k, v in sub.items()},
+                      {k: v[lo:hi] for k, v in extra.items()})
+    assert out.count == len(sel)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [out_path.name]
+
+    back = laspy.read(out_path)
+    src_header = src.infos[0].header
+    h = back.header
+    assert h.are_points_compressed == (suffix == ".laz")
+    assert h.point_format.id == src.point_format_id and str(h.version) == src.version
+    np.testing.assert_array_equal(h.scales, src.scales)
+    np.testing.assert_array_equal(h.offsets, src.offsets)
+    assert vlr_payloads(h.vlrs) == vlr_payloads(src_header.vlrs)
+    assert len(h.vlrs.get("ExtraBytesVlr")) == 1
+    assert LasSource(out_path).crs == src.crs
+    assert h.point_count == len(sel)
+    np.testing.assert_allclose(h.mins, sub_xyz.min(axis=0))
+    np.testing.assert_allclose(h.maxs, sub_xyz.max(axis=0))
+
+    np.testing.assert_array_equal(np.c_[back.x, back.y, back.z], sub_xyz)
+    for dim in src.attribute_names:  # every standard and extra-bytes dimension of the input
+        np.testing.assert_array_equal(np.array(back[dim]), sub[dim], err_msg=dim)
+    assert list(back.point_format.extra_dimension_names) == \
+        list(src.extra_dimension_names) + [d[0] for d in SIMPLIFY_DIMS]
+    for dim, values in extra.items():
+        got = np.array(back[dim])
+        assert got.dtype == values.dtype, dim
+        np.testing.assert_array_equal(got, values, err_msg=dim)
+    for struct in h.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs:
+        if struct.format_name() == "importance":
+            assert struct.description.rstrip(b"\0") == b"Importance at removal; NaN=kept"
+            assert struct.min[0] == np.nanmin(extra["importance"])
+            assert struct.max[0] == np.nanmax(extra["importance"])
+        if struct.format_name() == "simplify_rank":
+            assert (struct.min[0], struct.max[0]) == (-1, extra["simplify_rank"].max())
+
+    # and our own reader agrees, the new dimensions included
+    again_xyz, again = LasSource(out_path, chunk_points=5000).read_all()
+    np.testing.assert_array_equal(again_xyz, sub_xyz)
+    np.testing.assert_array_equal(again["simplify_rank"], extra["simplify_rank"])
+
+
+def test_evlrs_and_reused_dims_are_kept(tmp_path):
+    src, xyz, attrs = whole(EXTRA)
+    header = src.template_header()
+    header.evlrs = VLRList([laspy.VLR("tiledsimplify", 7, "test evlr", b"x" * 1000)])
+    n = 2000
+    extra = new_dims(n, 0)
+    first = write_las(tmp_path / "a.laz", header, xyz[:n], {k: v[:n] for k, v in attrs.items()},
+                      extra=extra)
+    back = laspy.read(first)
+    assert [(v.user_id, v.record_id, v.record_data) for v in back.evlrs] == \
+        [("tiledsimplify", 7, b"x" * 1000)]
+
+    # simplifying our own output again: the three dimensions already exist and are reused
+    again = LasSource(first)
+    xyz2, attrs2 = again.read_all()
+    extra2 = new_dims(n, 100)
+    with LasOutput(tmp_path / "b.las", again.template_header()) as out:
+        out.write(xyz2, attrs2, extra2)
+    back2 = laspy.read(tmp_path / "b.las")
+    assert list(back2.point_format.extra_dimension_names).count("importance") == 1
+    np.testing.assert_array_equal(np.array(back2["simplify_rank"]), extra2["simplify_rank"])
+    assert len(back2.evlrs) == 1
+
+
+def test_failed_write_leaves_nothing(tmp_path):
+    src, xyz, attrs = whole(AUTZEN)
+    n = 1000
+    part = {k: v[:n] for k, v in attrs.items()}
+    for suffix in (".laz", ".las"):
+        target = tmp_path / f"out{suffix}"
+        with pytest.raises(RuntimeError, match="boom"):
+            with LasOutput(target, src.template_header()) as out:
+                out.write(xyz[:n], part, new_dims(n, 0))
+                assert len(list(tmp_path.iterdir())) == 1  # the temporary file
+                raise RuntimeError("boom")
+        assert list(tmp_path.iterdir()) == []
+
+    # a bad chunk (a missing dimension) fails the same way
+    with pytest.raises(InputError, match="importance"):
+        with LasOutput(tmp_path / "out.laz", src.template_header()) as out:
+            out.write(xyz[:n], part, {"sharp_edge": np.zeros(n, np.uint8),
+                                      "simplify_rank": np.zeros(n, np.int64)})
+    assert list(tmp_path.iterdir()) == []
+
+    # an existing output is replaced only by a successful write
+    existing = tmp_path / "keep.las"
+    existing.write_bytes(b"previous")
+    with pytest.raises(RuntimeError):
+        with LasOutput(existing, src.template_header()) as out:
+            out.write(xyz[:n], part, new_dims(n, 0))
+            raise RuntimeError("boom")
+    assert existing.read_bytes() == b"previous"
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.las"]
+
+
+def test_write_rejects_bad_chunks(tmp_path):
+    src, xyz, attrs = whole(AUTZEN)
+    n = 10
+    part = {k: v[:n] for k, v in attrs.items()}
+    with LasOutput(tmp_path / "o.las", src.template_header()) as out:
+        with pytest.raises(InputError, match="unknown"):
+            out.write(xyz[:n], {**part, "colour": np.zeros(n)}, new_dims(n, 0))
+        with pytest.raises(InputError, match="integers"):
+            out.write(xyz[:n], {**part, "intensity": np.zeros(n)}, new_dims(n, 0))
+        with pytest.raises(InputError, match="cannot hold"):
+            out.write(xyz[:n], {**part, "user_data": np.full(n, 300)}, new_dims(n, 0))
+        with pytest.raises(InputError, match="NaN"):
+            out.write(np.full((n, 3), np.nan), part, new_dims(n, 0))
+        with pytest.raises(InputError, match="int32"):
+            out.write(xyz[:n] + 1e9, part, new_dims(n, 0))
+        with pytest.raises(InputError, match="values for"):
+            out.write(xyz[:n], {**part, "gps_time": np.zeros(n + 1)}, new_dims(n, 0))
+        out.write(xyz[:n], part, new_dims(n, 0))
+    assert laspy.read(tmp_path / "o.las").header.point_count == n
+
+
+# --------------------------------------------------------------------------------------
+# bad inputs
+# --------------------------------------------------------------------------------------
+
+def test_missing_and_unsupported_inputs(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nowhere.laz"):
+        LasSource(tmp_path / "nowhere.laz")
+    with pytest.raises(FileNotFoundError, match="no .las/.laz files in folder"):
+        las_files(tmp_path)
+    (tmp_path / "cloud.xyz").write_text("0 0 0\n")
+    with pytest.raises(FileNotFoundError, match=r"\*\.laz"):
+        las_files(str(tmp_path / "*.laz"))
+    with pytest.raises(FileNotFoundError, match="none is a .las/.laz"):
+        las_files(str(tmp_path / "*"))
+    with pytest.raises(FileFormatError, match=r"cloud\.xyz.*unsupported suffix"):
+        las_files(tmp_path / "cloud.xyz")
+    src = LasSource(lidar_file(AUTZEN))
+    with pytest.raises(FileFormatError, match=r"out\.ply"):
+        LasOutput(tmp_path / "out.ply", src.template_header())
+    with pytest.raises(FileNotFoundError, match="missing_dir"):
+        LasOutput(tmp_path / "missing_dir" / "out.laz", src.template_header())
+
+
+def test_corrupt_and_truncated_files(tmp_path):
+    raw = lidar_file(AUTZEN).read_bytes()
+
+    junk = tmp_path / "junk.las"
+    junk.write_bytes(b"this is not a LAS file" * 20)
+    with pytest.raises(FileFormatError, match=r"junk\.las.*signature"):
+        LasSource(junk)
+
+    empty = tmp_path / "empty.laz"
+    empty.write_bytes(b"")
+    with pytest.raises(FileFormatError, match=r"empty\.laz"):
+        LasSource(empty)
+
+    cut_laz = tmp_path / "cut.laz"
+    cut_laz.write_bytes(raw[: len(raw) // 2])
+    with pytest.raises(FileFormatError, match=r"cut\.laz.*truncated or corrupt"):
+        LasSource(cut_laz)
+
+    head_only = tmp_path / "head.laz"
+    head_only.write_bytes(raw[:150])
+    with pytest.raises(FileFormatError, match=r"head\.laz"):
+        LasSource(head_only)
+
+    las = tmp_path / "small.las"
+    small_las(las, AUTZEN, slice(0, 5000))
+    full = las.read_bytes()
+    cut_las = tmp_path / "cut.las"
+    cut_las.write_bytes(full[: len(full) - 1234])
+    with pytest.raises(FileFormatError, match=r"cut\.las: truncated LAS file.*5000 points"):
+        LasSource(cut_las)
+
+    # a file cut after it was opened: found while reading, with the file named
+    src = LasSource(las, chunk_points=1000)
+    las.write_bytes(full[: len(full) - 34 * 2500])
+    with pytest.raises(FileFormatError, match=r"small\.las: truncated.*5000 points.*2500"):
+        for _ in src.chunks():
+            pass
+
+
+def test_folder_reads_every_laz(tmp_path):
+    # several real files in a folder (symlinks keep it cheap): one cloud, consecutive indices
+    for name in (AUTZEN, LONE_STAR):
+        try:
+            (tmp_path / name).symlink_to(lidar_file(name))
+        except OSError:
+            shutil.copy(lidar_file(name), tmp_path / name)
+    with pytest.warns(UserWarning, match="different CRS"):
+        src = LasSource(str(tmp_path / "*.laz"), chunk_points=200_000)
+    assert [p.name for p in src.files] == sorted([AUTZEN, LONE_STAR])
+    assert src.count == COUNTS[AUTZEN] + COUNTS[LONE_STAR]
+    ends = [(s, len(x)) for s, x, _ in src.chunks()]
+    assert ends[0] == (0, COUNTS[AUTZEN])
+    assert ends[1][0] == COUNTS[AUTZEN]
+    assert ends[-1][0] + ends[-1][1] == src.count

@@ -1,0 +1,948 @@
+"""LAS/LAZ point clouds in and out, with memory bounded by a chunk size (laspy + lazrs).
+
+Public API
+----------
+las_files(spec) -> list[Path]
+    The ``.las``/``.laz`` files named by a file, a folder, a glob pattern or a list of those.
+LasSource(spec, chunk_points=1_000_000)
+    Describes the input from the file headers alone (files, point count, bounds, point format,
+    scales/offsets, CRS, dimension names) and reads it chunk by chunk with :meth:`LasSource.chunks`
+    as ``(start_index, xyz float64 (m, 3), attrs dict name -> (m,) array)``.
+LasOutput(path, template_header, extra_dims=SIMPLIFY_DIMS)
+    Streaming writer (a context manager): ``out.write(xyz, attrs, extra)`` per chunk; the file
+    appears under ``path`` only when the ``with`` block ends without an exception.
+write_las(path, template_header, xyz, attrs, *, extra, extra_dims=SIMPLIFY_DIMS)
+    One-shot wrapper of :class:`LasOutput`.
+SIMPLIFY_DIMS
+    The three extra-bytes dimensions the simplifier adds: ``sharp_edge`` (uint8, 1 on or near a
+    sharp edge), ``importance`` (float64, importance at removal, NaN for kept points) and
+    ``simplify_rank`` (int64, removal order, -1 for kept points).
+
+Decisions
+---------
+* Reading several files: they are read in order (the order of :func:`las_files`) as one cloud
+  with one running point index. Coordinates are returned as float64 (``X * scale + offset``),
+  so files with different scales/offsets, and even different point formats, can be read
+  together; ``attrs`` then holds only the dimensions (same name and type) common to all files.
+  A chunk never spans two files, so the last chunk of each file may be shorter.
+* Writing needs one layout: :meth:`LasSource.template_header` raises
+  :class:`~tiledsimplify.errors.FileFormatError` when the files differ in point format id or in
+  their set of dimensions (names and types, extra bytes included), and tells to merge/convert
+  them first (e.g. with PDAL). Differing scales/offsets are accepted: the output uses the first
+  file's, so coordinates of the other files are re-quantised to that grid (a change of at most
+  half a unit of the first file's scale). Files whose CRS descriptions differ give a warning.
+* The output keeps the template's LAS version, point format, every standard and extra-bytes
+  dimension, scales, offsets, global encoding, file source id, system identifier and every
+  VLR/EVLR (CRS included). The LASzip VLR is rewritten by the compressor (``.laz``) or dropped
+  (``.las``). Extra-bytes descriptions are written as the single Extra Bytes VLR the LAS 1.4
+  specification allows: several Extra Bytes VLRs in the input (laspy only reads the first one
+  and calls the rest "ExtraBytes") are merged here, so their real names survive. The header's
+  generating software becomes ``tiledsimplify <version>`` and the creation date today; counts,
+  bounds, points-by-return and GPS-time range are recomputed by laspy's writer. Waveform data
+  packets stored inside a file (point formats 4, 5, 9, 10) are not copied.
+* :meth:`LasOutput.write` is strict: ``attrs`` must hold every dimension of the template
+  except ``X``, ``Y``, ``Z`` (given as float ``xyz``), ``extra`` every added dimension; unknown
+  names, wrong lengths, floats for integer dimensions and coordinates that do not fit the
+  int32 grid raise :class:`~tiledsimplify.errors.InputError`. A dimension of the template that
+  already has the name of an added one (re-simplifying our own output) is reused, and the
+  value in ``extra`` wins.
+* CRS: :attr:`LasSource.crs` is a plain string without needing pyproj: ``"EPSG:<code>"`` when
+  the WKT VLR names a top-level EPSG code or, without WKT, the GeoTIFF keys do; otherwise the
+  WKT text; ``None`` when the file has no CRS records. The headers' ``parse_crs()`` (needs
+  pyproj) remains available through :meth:`LasSource.template_header`.
+
+Errors
+------
+A missing input raises :class:`FileNotFoundError` naming it. A file that is not LAS/LAZ, is
+truncated or corrupt raises :class:`~tiledsimplify.errors.FileFormatError` (a ``ValueError``)
+naming the file and saying what to do; so does an unsupported suffix.
+"""
+
+from __future__ import annotations
+
+import copy
+import datetime
+import errno
+import glob
+import os
+import re
+import tempfile
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Mapping
+
+import laspy
+import numpy as np
+
+from .. import __version__
+from ..errors import FileFormatError, InputError
+
+__all__ = [
+    "LAS_SUFFIXES",
+    "SIMPLIFY_DIMS",
+    "LasFileInfo",
+    "LasOutput",
+    "LasSource",
+    "las_files",
+    "write_las",
+]
+
+#: File suffixes read and written (case-insensitive); ``.laz`` is LASzip-compressed.
+LAS_SUFFIXES = (".las", ".laz")
+
+#: Extra-bytes dimensions added by the simplifier: (name, numpy type, description <= 32 chars).
+SIMPLIFY_DIMS = (
+    ("sharp_edge", "uint8", "1 = on/near a sharp edge"),
+    ("importance", "float64", "Importance at removal; NaN=kept"),
+    ("simplify_rank", "int64", "Removal order; -1 = kept"),
+)
+
+_XYZ = ("X", "Y", "Z")
+_GLOB_CHARS = re.compile(r"[*?\[]")
+_INT32 = np.iinfo(np.int32)
+_FIX_READ = ("The file may be truncated or corrupt: compare its size with the original, copy or "
+             "export it again, or check it with `pdal info` / `lasinfo`.")
+
+
+# --------------------------------------------------------------------------------------
+# finding files
+# --------------------------------------------------------------------------------------
+
+def _is_las(path: Path) -> bool:
+    return path.suffix.lower() in LAS_SUFFIXES
+
+
+def _files_of_one(spec) -> list[Path]:
+    path = Path(spec)
+    if path.is_file():
+        if not _is_las(path):
+            raise FileFormatError(
+                f"{path}: unsupported suffix '{path.suffix}'; LAS input must be a "
+                f"{'/'.join(LAS_SUFFIXES)} file, a folder of them or a glob pattern. Convert "
+                "other formats first (e.g. `pdal translate in.e57 out.laz`).")
+        return [path]
+    if path.is_dir():
+        found = sorted(p for p in path.iterdir() if p.is_file() and _is_las(p))
+        if not found:
+            raise FileNotFoundError(errno.ENOENT,
+                                    f"no .las/.laz files in folder {path}", str(path))
+        return found
+    text = os.fspath(spec)
+    if _GLOB_CHARS.search(text):
+        matched = sorted(Path(p) for p in glob.glob(text, recursive=True))
+        found = [p for p in matched if p.is_file() and _is_las(p)]
+        if not found:
+            what = (f"{len(matched)} paths match but none is a .las/.laz file" if matched
+                    else "nothing matches")
+            raise FileNotFoundError(errno.ENOENT,
+                                    f"no LAS/LAZ files for pattern {text!r}: {what}", text)
+        return found
+    raise FileNotFoundError(errno.ENOENT, f"LAS/LAZ input {text!r} does not exist", text)
+
+
+def las_files(spec) -> list[Path]:
+    """List the LAS/LAZ files named by ``spec``.
+
+    Parameters
+    ----------
+    spec : str, PathLike or sequence of them
+        A path to one ``.las``/``.laz`` file, a folder (every ``*.las``/``*.laz`` directly
+        inside, suffixes case-insensitive), or a glob pattern string (``**`` recurses). A list or
+        tuple of such specs is expanded in its own order.
+
+    Returns
+    -------
+    list of Path
+        Sorted within a folder or pattern, without duplicates.
+
+    Raises
+    ------
+    FileNotFoundError
+        Nothing exists or matches; the message names ``spec``.
+    FileFormatError
+        ``spec`` is an existing file whose suffix is not ``.las``/``.laz``.
+    """
+    specs = spec if isinstance(spec, (list, tuple)) else [spec]
+    if not specs:
+        raise FileNotFoundError(errno.ENOENT, "no LAS/LAZ input given (empty list)", "")
+    out: list[Path] = []
+    seen = set()
+    for one in specs:
+        for path in _files_of_one(one):
+            key = os.path.abspath(path)
+            if key not in seen:
+                seen.add(key)
+                out.append(path)
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# headers
+# --------------------------------------------------------------------------------------
+
+def _format_error(path, exc: BaseException, where: str = "") -> FileFormatError:
+    return FileFormatError(f"{path}: not a readable LAS/LAZ file{where} "
+                           f"({type(exc).__name__}: {exc}). {_FIX_READ}")
+
+
+def _open_reader(path: Path) -> laspy.LasReader:
+    """``laspy.open`` that closes the file on failure and names the file in its errors."""
+    fh = open(path, "rb")  # FileNotFoundError / PermissionError pass through as they are
+    try:
+        reader = laspy.open(fh, closefd=True)
+    except BaseException as exc:
+        fh.close()
+        if isinstance(exc, Exception):
+            raise _format_error(path, exc) from exc
+        raise
+    try:
+        _merge_extra_bytes(reader.header)
+    except BaseException:
+        reader.close()
+        raise
+    return reader
+
+
+def _merge_extra_bytes(header: laspy.LasHeader) -> None:
+    """Describe the extra bytes from *every* Extra Bytes VLR, keeping no-data values.
+
+    laspy reads only the first Extra Bytes VLR and names the remaining bytes "ExtraBytes"; it
+    also drops the no-data values. Rebuild the point format from all of them (in VLR order)
+    when their sizes add up to the record length; otherwise keep laspy's reading.
+    """
+    eb_vlrs = header.vlrs.get("ExtraBytesVlr")
+    if not eb_vlrs:
+        return
+    try:
+        params = []
+        for vlr in eb_vlrs:
+            for struct, param in zip(vlr.extra_bytes_structs, vlr.type_of_extra_dims()):
+                no_data = struct.no_data
+                if no_data is not None:
+                    param.no_data = np.asarray(no_data)
+                params.append(param)
+        names = [p.name for p in params]
+        fmt = laspy.PointFormat(header.point_format.id)
+        if len(set(names)) != len(names) or set(names) & set(fmt.dimension_names):
+            return
+        for param in params:
+            fmt.add_extra_dimension(param)
+        if fmt.size != header.point_format.size:
+            return
+    except Exception:  # an odd Extra Bytes VLR: laspy's own reading stands
+        return
+    header.point_format = fmt  # the setter writes one Extra Bytes VLR describing all of them
+
+
+_TOP_EPSG = re.compile(r'(?:AUTHORITY|ID)\[\s*"EPSG"\s*,\s*"?(\d+)"?\s*\]\s*\]\s*$',
+                       re.IGNORECASE)
+
+
+def _crs_description(header: laspy.LasHeader) -> tuple[str | None, str | None]:
+    """(short CRS string, WKT text or None) from the CRS VLRs/EVLRs, without pyproj."""
+    records = list(header.vlrs)
+    if header.evlrs:
+        records += list(header.evlrs)
+    wkt = None
+    epsg = None
+    for rec in records:
+        kind = type(rec).__name__
+        if kind == "WktCoordinateSystemVlr" and wkt is None:
+            text = rec.string
+            if isinstance(text, bytes):
+                text = text.decode("ascii", "replace")
+            text = text.rstrip("\0").strip()
+            wkt = text or None
+        elif kind == "GeoKeyDirectoryVlr" and epsg is None:
+            keys = {k.id: k for k in rec.geo_keys}
+            for key_id in (3072, 2048):  # ProjectedCSTypeGeoKey, GeographicTypeGeoKey
+                key = keys.get(key_id)
+                if key is not None and key.tiff_tag_location == 0 and \
+                        key.value_offset not in (0, 32767):
+                    epsg = int(key.value_offset)
+                    break
+    if wkt is not None:
+        match = _TOP_EPSG.search(wkt)
+        return (f"EPSG:{match.group(1)}" if match else wkt), wkt
+    if epsg is not None:
+        return f"EPSG:{epsg}", None
+    return None, None
+
+
+@dataclass(frozen=True)
+class LasFileInfo:
+    """What the header of one LAS/LAZ file says (no point is read).
+
+    Attributes
+    ----------
+    path : Path
+    version : str
+        LAS version, e.g. ``"1.4"``.
+    point_format_id : int
+    point_count : int
+    scales, offsets : (3,) float64
+    mins, maxs : (3,) float64
+        Bounding box as written in the header.
+    dimension_names : tuple of str
+        Every dimension, ``X``, ``Y``, ``Z`` and extra bytes included.
+    extra_dimensions : tuple of (name, numpy type string, description)
+    crs : str or None
+        See :attr:`LasSource.crs`.
+    compressed : bool
+    header : laspy.LasHeader
+        The header itself (VLRs, EVLRs, extra-bytes description).
+    """
+
+    path: Path
+    version: str
+    point_format_id: int
+    point_count: int
+    scales: np.ndarray
+    offsets: np.ndarray
+    mins: np.ndarray
+    maxs: np.ndarray
+    dimension_names: tuple
+    extra_dimensions: tuple
+    crs: str | None
+    compressed: bool
+    header: laspy.LasHeader
+
+    @property
+    def signature(self) -> tuple:
+        """Point format id and every dimension's (name, dtype): equal ones write alike."""
+        return (self.point_format_id,
+                tuple((d.name, str(d.dtype)) for d in self.header.point_format.dimensions))
+
+
+def _read_info(path: Path) -> LasFileInfo:
+    with _open_reader(path) as reader:
+        header = reader.header
+        count = int(header.point_count)
+        if count > 0:
+            if header.are_points_compressed:
+                try:  # builds the LAZ decoder: reads the LASzip VLR and the chunk table
+                    _ = reader.point_source
+                except Exception as exc:
+                    raise _format_error(path, exc, " (LAZ chunk table)") from exc
+            else:
+                need = header.offset_to_point_data + count * header.point_format.size
+                size = path.stat().st_size
+                if size < need:
+                    raise FileFormatError(
+                        f"{path}: truncated LAS file: the header promises {count} points of "
+                        f"{header.point_format.size} bytes ({need} bytes up to the last point) "
+                        f"but the file has {size} bytes. {_FIX_READ}")
+        fmt = header.point_format
+        crs, _ = _crs_description(header)
+        return LasFileInfo(
+            path=path,
+            version=str(header.version),
+            point_format_id=int(fmt.id),
+            point_count=count,
+            scales=np.array(header.scales, dtype=np.float64),
+            offsets=np.array(header.offsets, dtype=np.float64),
+            mins=np.array(header.mins, dtype=np.float64),
+            maxs=np.array(header.maxs, dtype=np.float64),
+            dimension_names=tuple(fmt.dimension_names),
+            extra_dimensions=tuple((d.name, str(d.dtype), d.description)
+                                   for d in fmt.extra_dimensions),
+            crs=crs,
+            compressed=bool(header.are_points_compressed),
+            header=header,
+        )
+
+
+# --------------------------------------------------------------------------------------
+# reading
+# --------------------------------------------------------------------------------------
+
+class LasSource:
+    """One or more LAS/LAZ files read as one point cloud, chunk by chunk.
+
+    Only the headers are read on construction; points are read by :meth:`chunks`, so memory
+    stays proportional to ``chunk_points``.
+
+    Parameters
+    ----------
+    spec : str, PathLike or sequence of them
+        See :func:`las_files`.
+    chunk_points : int, default 1_000_000
+        Most points per chunk.
+
+    Attributes
+    ----------
+    files : list of Path
+    infos : list of LasFileInfo
+        One per file, in reading order.
+    chunk_points : int
+
+    Raises
+    ------
+    FileNotFoundError
+        Nothing matches ``spec``.
+    FileFormatError
+        A file is not LAS/LAZ, is truncated or corrupt (found from its header and, for LAZ, its
+        chunk table), or has an unsupported suffix.
+    """
+
+    def __init__(self, spec, chunk_points: int = 1_000_000):
+        if int(chunk_points) != chunk_points or chunk_points < 1:
+            raise InputError(f"chunk_points must be a positive integer, got {chunk_points!r}")
+        self.chunk_points = int(chunk_points)
+        self.files = las_files(spec)
+        self.infos = [_read_info(p) for p in self.files]
+        crs = {i.crs for i in self.infos if i.crs is not None}
+        if len(crs) > 1:
+            warnings.warn("LAS/LAZ files with different CRS descriptions are read as one cloud: "
+                          + "; ".join(f"{i.path.name}: {_short(i.crs)}" for i in self.infos),
+                          UserWarning, stacklevel=2)
+        first = self.infos[0]
+        common = []
+        kinds = [dict((d.name, str(d.dtype)) for d in i.header.point_format.dimensions)
+                 for i in self.infos]
+        for name, dtype in kinds[0].items():
+            if name not in _XYZ and all(k.get(name) == dtype for k in kinds[1:]):
+                common.append(name)
+        self._attribute_names = tuple(common)
+        self._first = first
+
+    # ---- description from the headers -------------------------------------------------
+
+    @property
+    def count(self) -> int:
+        """Total number of points, from the headers."""
+        return sum(i.point_count for i in self.infos)
+
+    def __len__(self) -> int:
+        return self.count
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(mins, maxs)``, each (3,) float64: the union of the headers' bounding boxes."""
+        infos = [i for i in self.infos if i.point_count > 0] or self.infos
+        return (np.min([i.mins for i in infos], axis=0), np.max([i.maxs for i in infos], axis=0))
+
+    @property
+    def point_format_id(self) -> int:
+        """Point format id of the first file (see :meth:`template_header` for mixed sets)."""
+        return self._first.point_format_id
+
+    @property
+    def point_format(self) -> laspy.PointFormat:
+        """laspy point format of the first file, extra-bytes dimensions included."""
+        return self._first.header.point_format
+
+    @property
+    def version(self) -> str:
+        """LAS version of the first file."""
+        return self._first.version
+
+    @property
+    def scales(self) -> np.ndarray:
+        """(3,) scales of the first file, those an output from :meth:`template_header` uses."""
+        return self._first.scales.copy()
+
+    @property
+    def offsets(self) -> np.ndarray:
+        """(3,) offsets of the first file, those an output from :meth:`template_header` uses."""
+        return self._first.offsets.copy()
+
+    @property
+    def crs(self) -> str | None:
+        """CRS of the first file as a string: ``"EPSG:<code>"``, WKT text, or None.
+
+        Read from the WKT VLR (a top-level EPSG id gives ``"EPSG:<code>"``, otherwise the WKT
+        itself) or, without one, from the GeoTIFF keys (projected, then geographic EPSG code).
+        It is what the file *says*: nothing checks it against the coordinates.
+        """
+        return self._first.crs
+
+    @property
+    def crs_wkt(self) -> str | None:
+        """The WKT text of the first file's WKT CRS record, if it has one."""
+        return _crs_description(self._first.header)[1]
+
+    @property
+    def dimension_names(self) -> tuple[str, ...]:
+        """Every dimension of the first file (``X``, ``Y``, ``Z`` and extra bytes included)."""
+        return self._first.dimension_names
+
+    @property
+    def extra_dimension_names(self) -> tuple[str, ...]:
+        """Names of the first file's extra-bytes dimensions."""
+        return tuple(name for name, _, _ in self._first.extra_dimensions)
+
+    @property
+    def attribute_names(self) -> tuple[str, ...]:
+        """Keys of the ``attrs`` dict of :meth:`chunks`: the dimensions other than X, Y, Z
+        that every file has with the same type (all of them for a single file)."""
+        return self._attribute_names
+
+    def template_header(self) -> laspy.LasHeader:
+        """A copy of the first file's header, to give to :class:`LasOutput`.
+
+        Returns
+        -------
+        laspy.LasHeader
+            With VLRs, EVLRs, scales, offsets and the merged extra-bytes description.
+
+        Raises
+        ------
+        FileFormatError
+            The files differ in point format id or in their dimensions (names/types, extra
+            bytes included), so no single output layout keeps all of them.
+        """
+        ref = self._first
+        for info in self.infos[1:]:
+            if info.signature != ref.signature:
+                raise FileFormatError(
+                    f"{info.path} (point format {info.point_format_id}, dimensions "
+                    f"{', '.join(info.dimension_names)}) and {ref.path} (point format "
+                    f"{ref.point_format_id}, dimensions {', '.join(ref.dimension_names)}) "
+                    "cannot be written to one LAS/LAZ output: they must have the same point "
+                    "format and dimensions. Merge or convert them to one layout first, e.g. "
+                    "`pdal merge a.laz b.laz merged.laz` or `pdal translate in.laz out.laz "
+                    "--writers.las.dataformat_id=<id> --writers.las.extra_dims=all`.")
+        return copy.deepcopy(ref.header)
+
+    def __repr__(self) -> str:
+        return (f"LasSource({len(self.files)} file(s), {self.count} points, point format "
+                f"{self.point_format_id}, crs={_short(self.crs)!r})")
+
+    # ---- points -------------------------------------------------------------------------
+
+    def chunks(self) -> Iterator[tuple[int, np.ndarray, dict]]:
+        """Read the points, at most ``chunk_points`` at a time, in file order.
+
+        Yields
+        ------
+        start : int
+            Global index of the chunk's first point (running across files).
+        xyz : (m, 3) float64
+            ``X * scale + offset`` with the chunk's file's scales/offsets.
+        attrs : dict of str -> ndarray
+            One array per name of :attr:`attribute_names`, length ``m`` (shape ``(m, k)`` for
+            an extra-bytes dimension of ``k`` elements); scaled extra-bytes dimensions are
+            returned scaled (float64).
+
+        Raises
+        ------
+        FileFormatError
+            A file is truncated or corrupt (fewer points than its header promises, or the
+            decompressor fails); the message names the file and the point range.
+        """
+        start = 0
+        names = self._attribute_names
+        for info in self.infos:
+            if info.point_count == 0:
+                continue
+            path = info.path
+            with _open_reader(path) as reader:
+                header = reader.header
+                if header.point_format.size != info.header.point_format.size or \
+                        int(header.point_count) != info.point_count:
+                    raise FileFormatError(f"{path}: changed since it was opened; open it again.")
+                scales = np.asarray(header.scales, dtype=np.float64)
+                offsets = np.asarray(header.offsets, dtype=np.float64)
+                done = 0
+                while done < info.point_count:
+                    want = min(self.chunk_points, info.point_count - done)
+                    try:
+                        rec = reader.read_points(want)
+                    except Exception as exc:
+                        raise _format_error(path, exc, f" while reading points {done} to "
+                                                       f"{done + want - 1}") from exc
+                    if len(rec) != want:
+                        raise FileFormatError(
+                            f"{path}: truncated: the header promises {info.point_count} points "
+                            f"but only {done + len(rec)} could be read. {_FIX_READ}")
+                    xyz = np.empty((want, 3), dtype=np.float64)
+                    for axis, dim in enumerate(_XYZ):
+                        np.multiply(rec[dim], scales[axis], out=xyz[:, axis])
+                        xyz[:, axis] += offsets[axis]
+                    attrs = {name: np.array(rec[name]) for name in names}
+                    del rec
+                    yield start + done, xyz, attrs
+                    done += want
+            start += info.point_count
+
+    def read_all(self) -> tuple[np.ndarray, dict]:
+        """Every point at once (for tests and small inputs).
+
+        Returns
+        -------
+        xyz : (n, 3) float64
+        attrs : dict of str -> ndarray
+            As in :meth:`chunks`, concatenated.
+        """
+        xyzs, parts = [], {name: [] for name in self._attribute_names}
+        for _, xyz, attrs in self.chunks():
+            xyzs.append(xyz)
+            for name, values in attrs.items():
+                parts[name].append(values)
+        if not xyzs:
+            empty = laspy.ScaleAwarePointRecord.zeros(0, header=self._first.header)
+            return (np.empty((0, 3)),
+                    {name: np.array(empty[name]) for name in self._attribute_names})
+        return np.concatenate(xyzs), {n: np.concatenate(v) for n, v in parts.items()}
+
+
+def _short(text, limit=60):
+    if text is None or len(text) <= limit:
+        return text
+    return text[:limit - 3] + "..."
+
+
+# --------------------------------------------------------------------------------------
+# writing
+# --------------------------------------------------------------------------------------
+
+def _as_params(dim) -> laspy.ExtraBytesParams:
+    if isinstance(dim, laspy.ExtraBytesParams):
+        return dim
+    name, dtype, *rest = dim
+    return laspy.ExtraBytesParams(name=name, type=np.dtype(dtype),
+                                  description=rest[0] if rest else "")
+
+
+class LasOutput:
+    """Stream points into a LAS/LAZ file laid out like a template header, plus extra dims.
+
+    Points go to a temporary file beside ``path`` (``.<name>.<random>.partial``), renamed to
+    ``path`` by :meth:`close` — which the ``with`` statement calls when its block ends without
+    an exception. On an exception (or :meth:`abort`) the temporary file is deleted and nothing
+    is left under ``path``; an existing ``path`` is replaced only on success.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        ``.laz`` (LASzip via lazrs) or ``.las`` (uncompressed), case-insensitive.
+    template_header : laspy.LasHeader
+        Usually :meth:`LasSource.template_header`. Its version, point format, dimensions,
+        scales, offsets, VLRs and EVLRs are kept (not modified: a copy is used).
+    extra_dims : sequence of laspy.ExtraBytesParams or (name, dtype, description)
+        Dimensions to add, by default :data:`SIMPLIFY_DIMS`. One whose name the template
+        already has with the same type is reused.
+
+    Attributes
+    ----------
+    path : Path
+    header : laspy.LasHeader
+        The output layout (template plus added dimensions).
+    attribute_names : tuple of str
+        Names :meth:`write` expects in ``attrs``.
+    extra_names : tuple of str
+        Names :meth:`write` expects in ``extra``.
+    count : int
+        Points written so far.
+
+    Raises
+    ------
+    FileFormatError
+        Unsupported suffix.
+    FileNotFoundError
+        The output folder does not exist.
+    InputError
+        An added dimension clashes with a standard dimension or with an extra dimension of
+        another type.
+
+    Examples
+    --------
+    >>> src = LasSource("tiles/")                                  # doctest: +SKIP
+    >>> with LasOutput("out.laz", src.template_header()) as out:  # doctest: +SKIP
+    ...     for start, xyz, attrs in src.chunks():
+    ...         keep = ...
+    ...         out.write(xyz[keep], {k: v[keep] for k, v in attrs.items()},
+    ...                   {"sharp_edge": ..., "importance": ..., "simplify_rank": ...})
+    """
+
+    def __init__(self, path, template_header: laspy.LasHeader, extra_dims=SIMPLIFY_DIMS):
+        self.path = Path(path)
+        suffix = self.path.suffix.lower()
+        if suffix not in LAS_SUFFIXES:
+            raise FileFormatError(f"{self.path}: cannot write '{self.path.suffix}' as LAS; "
+                                  "name the output *.las (uncompressed) or *.laz (compressed).")
+        directory = self.path.parent if str(self.path.parent) else Path(".")
+        if not directory.is_dir():
+            raise FileNotFoundError(errno.ENOENT, f"output folder {directory} does not exist "
+                                                  f"(for {self.path}); create it first",
+                                    str(directory))
+        compress = suffix == ".laz"
+        if compress and not laspy.LazBackend.detect_available():
+            raise ImportError(f"{self.path}: writing .laz needs a LAZ backend: "
+                              "pip install 'laspy[lazrs]'")
+
+        header = copy.deepcopy(template_header)
+        params = [_as_params(d) for d in extra_dims]
+        names = [p.name for p in params]
+        if len(set(names)) != len(names):
+            raise InputError(f"extra_dims has repeated names: {names}")
+        existing = {d.name: d for d in header.point_format.dimensions}
+        new = []
+        for p in params:
+            dim = existing.get(p.name)
+            if dim is None:
+                new.append(p)
+            elif dim.is_standard or np.dtype(dim.dtype) != p.type:
+                raise InputError(
+                    f"cannot add dimension {p.name!r} ({p.type}) to {self.path}: the template "
+                    f"already has a {'standard' if dim.is_standard else 'extra'} dimension of "
+                    f"that name of type {dim.dtype}; rename the added dimension.")
+        if new:
+            header.add_extra_dims(new)
+        header.generating_software = f"tiledsimplify {__version__}"[:32]
+        header.creation_date = datetime.date.today()
+        evlrs = header.evlrs if header.version.minor >= 4 else None
+        self._evlrs = evlrs if evlrs else None
+        self.header = header
+        self.attribute_names = tuple(n for n in header.point_format.dimension_names
+                                     if n not in _XYZ)
+        self.extra_names = tuple(names)
+        self.count = 0
+        self._finished = False
+        self._writer = None
+        self._ranges: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".partial",
+                                   dir=directory)
+        self._tmp = Path(tmp)
+        try:
+            fh = os.fdopen(fd, "w+b")
+        except BaseException:
+            os.close(fd)
+            self._unlink_tmp()
+            raise
+        try:
+            self._writer = laspy.LasWriter(fh, header, do_compress=compress, closefd=True)
+        except BaseException as exc:
+            fh.close()
+            self._unlink_tmp()
+            self._finished = True
+            if isinstance(exc, Exception) and not isinstance(exc, (OSError, MemoryError)):
+                raise FileFormatError(f"{self.path}: cannot write this header as LAS/LAZ "
+                                      f"({type(exc).__name__}: {exc})") from exc
+            raise
+
+    # ---- context manager ----------------------------------------------------------------
+
+    def __enter__(self) -> "LasOutput":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+        return False
+
+    def __del__(self):  # never leave a temporary file behind, even if close() was forgotten
+        try:
+            if not self._finished:
+                self.abort()
+        except Exception:
+            pass
+
+    # ---- writing ------------------------------------------------------------------------
+
+    def write(self, xyz, attrs: Mapping | None = None, extra: Mapping | None = None) -> None:
+        """Append one chunk of points.
+
+        Parameters
+        ----------
+        xyz : (m, 3) array_like of float
+            Coordinates; quantised to the output's scales/offsets (``round((x - offset) /
+            scale)``), which must fit int32.
+        attrs : dict of str -> (m,) array, optional
+            Every name of :attr:`attribute_names` (the template's dimensions except X, Y, Z),
+            e.g. the ``attrs`` of :meth:`LasSource.chunks` restricted to the written points.
+        extra : dict of str -> (m,) array, optional
+            Every name of :attr:`extra_names`.
+
+        Raises
+        ------
+        InputError
+            Missing or unknown names, wrong lengths, non-finite or out-of-range coordinates,
+            values that do not fit a dimension.
+        ValueError
+            The output is already closed or aborted.
+        """
+        if self._finished:
+            raise ValueError(f"{self.path}: LasOutput is closed")
+        xyz = np.asarray(xyz, dtype=np.float64)
+        if xyz.ndim != 2 or xyz.shape[1] != 3:
+            raise InputError(f"{self.path}: xyz must have shape (m, 3), got {xyz.shape}")
+        m = len(xyz)
+        attrs = dict(attrs or {})
+        extra = dict(extra or {})
+        unknown = sorted(set(attrs) - set(self.attribute_names))
+        unknown += sorted(set(extra) - set(self.extra_names))
+        if unknown:
+            raise InputError(f"{self.path}: unknown dimension(s) {unknown}; the output has "
+                             f"{list(self.attribute_names)}")
+        missing = [n for n in self.attribute_names if n not in attrs and n not in extra]
+        missing += [n for n in self.extra_names if n not in extra]
+        if missing:
+            raise InputError(f"{self.path}: no values given for dimension(s) {missing}; pass "
+                             "every input dimension in attrs (from LasSource.chunks) and every "
+                             "added one in extra")
+        if m == 0:
+            return
+
+        header = self.header
+        scales = np.asarray(header.scales, dtype=np.float64)
+        offsets = np.asarray(header.offsets, dtype=np.float64)
+        grid = np.round((xyz - offsets) / scales)
+        if not np.isfinite(grid).all():
+            raise InputError(f"{self.path}: xyz has NaN or infinite coordinates")
+        low, high = grid.min(axis=0), grid.max(axis=0)
+        if (low < _INT32.min).any() or (high > _INT32.max).any():
+            raise InputError(
+                f"{self.path}: coordinates {xyz.min(axis=0)} .. {xyz.max(axis=0)} do not fit "
+                f"the output's int32 grid (scales {scales}, offsets {offsets}); points of "
+                "another file far from the first one? Rescale the inputs to common offsets "
+                "first (e.g. `pdal translate --writers.las.offset_x=auto ...`).")
+        rec = laspy.ScaleAwarePointRecord.zeros(m, header=header)
+        for axis, dim in enumerate(_XYZ):
+            rec[dim] = grid[:, axis].astype(np.int32)
+        for name in self.attribute_names + self.extra_names:
+            if name in _XYZ:
+                continue
+            values = extra[name] if name in extra else attrs[name]
+            self._set(rec, name, values, m)
+        self._grow_ranges(rec)
+        try:
+            self._writer.write_points(rec)
+        except Exception as exc:
+            if isinstance(exc, OSError):
+                raise
+            raise FileFormatError(f"{self.path}: writing points failed "
+                                  f"({type(exc).__name__}: {exc})") from exc
+        self.count += m
+
+    def _set(self, rec, name, values, m):
+        values = np.asarray(values)
+        if values.shape[:1] != (m,):
+            raise InputError(f"{self.path}: dimension {name!r} has {values.shape} values for "
+                             f"{m} points")
+        dim = self.header.point_format.dimension_by_name(name)
+        scaled = dim.scales is not None or dim.offsets is not None
+        target = np.dtype(dim.dtype).base if dim.dtype is not None else np.dtype(np.uint8)
+        if target.kind in "iu" and not scaled and values.dtype.kind not in "biu":
+            raise InputError(f"{self.path}: dimension {name!r} holds integers ({target}) but "
+                             f"got {values.dtype} values; convert them first")
+        if target.kind in "iu" and not scaled and values.size and values.dtype.kind in "iu":
+            info = np.iinfo(target)
+            vmin, vmax = int(values.min()), int(values.max())
+            if vmin < info.min or vmax > info.max:
+                raise InputError(f"{self.path}: dimension {name!r} ({target}) cannot hold "
+                                 f"values {vmin} .. {vmax}")
+        try:
+            rec[name] = values
+        except Exception as exc:
+            raise InputError(f"{self.path}: cannot store values in dimension {name!r} "
+                             f"({type(exc).__name__}: {exc})") from exc
+
+    def _grow_ranges(self, rec):
+        """Track the raw min/max of every extra dimension (no-data and NaN left out)."""
+        for dim in self.header.point_format.extra_dimensions:
+            raw = np.asarray(rec.array[dim.name]).reshape(len(rec), -1)
+            lo = np.full(raw.shape[1], np.nan)
+            hi = np.full(raw.shape[1], np.nan)
+            for i in range(raw.shape[1]):
+                col = raw[:, i]
+                if dim.no_data is not None:
+                    col = col[col != np.asarray(dim.no_data).reshape(-1)[i]]
+                if col.dtype.kind == "f":
+                    col = col[~np.isnan(col)]
+                if col.size:
+                    lo[i], hi[i] = col.min(), col.max()
+            old = self._ranges.get(dim.name)
+            if old is not None:
+                lo, hi = np.fmin(old[0], lo), np.fmax(old[1], hi)
+            self._ranges[dim.name] = (lo, hi)
+
+    def _set_extra_bytes_ranges(self):
+        """Store the tracked min/max in the Extra Bytes VLR (laspy 2.7 records, for one-element
+        dimensions, the first point's value); without valid values, claim no min/max."""
+        for vlr in self._writer.header.vlrs.get("ExtraBytesVlr"):
+            for struct in vlr.extra_bytes_structs:
+                if struct.data_type == 0:
+                    continue
+                bits = struct.MIN_BIT_MASK | struct.MAX_BIT_MASK
+                lo, hi = self._ranges.get(struct.format_name(), (None, None))
+                try:
+                    if lo is None or np.isnan(lo).any() or np.isnan(hi).any():
+                        raise ValueError("no valid value")
+                    struct.options |= bits
+                    struct._raw_min()[:] = lo
+                    struct._raw_max()[:] = hi
+                except Exception:
+                    struct.options &= ~bits
+
+    # ---- finishing ----------------------------------------------------------------------
+
+    def close(self) -> Path:
+        """Finish the file (header counts and bounds, EVLRs) and rename it to :attr:`path`.
+
+        Returns
+        -------
+        Path
+            :attr:`path`. Calling again does nothing. On failure the temporary file is
+            deleted and the error is raised.
+        """
+        if self._finished:
+            return self.path
+        self._finished = True
+        try:
+            self._set_extra_bytes_ranges()
+            if self._evlrs:
+                self._writer.write_evlrs(self._evlrs)
+            self._writer.close()
+            os.replace(self._tmp, self.path)
+        except BaseException:
+            self._discard_writer()
+            self._unlink_tmp()
+            raise
+        return self.path
+
+    def abort(self) -> None:
+        """Drop everything written: close and delete the temporary file; ``path`` untouched."""
+        self._finished = True
+        self._discard_writer()
+        self._unlink_tmp()
+
+    def _discard_writer(self):
+        writer, self._writer = self._writer, None
+        if writer is None:
+            return
+        try:
+            writer.dest.close()
+        except Exception:
+            pass
+
+    def _unlink_tmp(self):
+        try:
+            os.unlink(self._tmp)
+        except (OSError, AttributeError):
+            pass
+
+
+def write_las(path, template_header: laspy.LasHeader, xyz, attrs: Mapping | None = None, *,
+              extra: Mapping | None = None, extra_dims=SIMPLIFY_DIMS) -> Path:
+    """Write one LAS/LAZ file in one call: :class:`LasOutput` with a single :meth:`~LasOutput.write`.
+
+    Parameters
+    ----------
+    path, template_header, extra_dims
+        See :class:`LasOutput`.
+    xyz, attrs, extra
+        See :meth:`LasOutput.write`.
+
+    Returns
+    -------
+    Path
+    """
+    with LasOutput(path, template_header, extra_dims) as out:
+        out.write(xyz, attrs, extra)
+    return out.path
