@@ -1,0 +1,929 @@
+"""A zarr v3 store of overlapping spatial tiles, filled by streaming a huge point cloud.
+
+Layout of the store directory (a zarr v3 group)::
+
+    zarr.json                      root attributes (see below)
+    tiles/<id>/xyz                 float64 (k, 3)  core points of tile <id>
+    tiles/<id>/index               int64 (k,)      their global index in the input
+    tiles/<id>/attrs/<name>        (k, ...)        per-point attribute, input dtype
+    tiles/<id>/result/<name>       (k, ...)        written by :meth:`TileStore.write_result`;
+                                                   the result group's attribute ``done`` is
+                                                   set true only after all its arrays are written
+
+Root attributes: ``format``/``format_version``, ``complete`` (false until the ingest has
+finished), ``plan`` (:meth:`TilePlan.to_dict`), ``halo``, ``halo_is_default``, ``spacing``,
+``spacing_estimate`` (how it was obtained), ``n_total``, ``tile_points``, ``tile_counts``,
+``bounds``, ``chunk_rows``, ``attributes`` (name -> dtype and trailing shape), ``sample_size``,
+``seed``, ``config`` (the caller's dict) and ``provenance`` (the caller's dict plus package,
+zarr and numpy versions and the UTC creation time).
+
+Input is any callable returning a fresh iterable of chunks ``(start_index, xyz, attrs)``:
+``xyz`` is a finite float64 ``(m, 3)`` array, ``attrs`` maps names to ``(m, ...)`` arrays and
+the chunk holds the points with global indices ``start_index .. start_index + m - 1``. The
+chunks together must cover ``0 .. n-1`` exactly once (in any order). The callable is called
+twice (sampling pass, then writing pass) and must yield the same chunks both times. Memory use
+is bounded by the sample size, one input chunk and the write buffer (``buffer_points``), never
+by the size of the input.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import re
+from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zarr
+from scipy.spatial import cKDTree
+from zarr.codecs import BloscCodec
+from zarr.core.group import GroupMetadata
+from zarr.storage import LocalStore, MemoryStore
+
+from ..errors import InputError, TiledSimplifyError
+from .partition import TilePlan, plan_tiles
+
+__all__ = [
+    "ChunkSource",
+    "IncompleteStoreError",
+    "ResultExistsError",
+    "StoreError",
+    "StoreExistsError",
+    "TileStore",
+    "estimate_spacing",
+]
+
+ChunkSource = Callable[[], Iterable[tuple[int, np.ndarray, Mapping[str, np.ndarray]]]]
+
+FORMAT = "tiledsimplify.tilestore"
+FORMAT_VERSION = 1
+DEFAULT_CHUNK_ROWS = 65_536
+HALO_SPACINGS = 10.0
+_WRITE_THREADS = 4  # concurrent array writes during ingest (zarr/blosc release the GIL)
+_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
+
+
+class StoreError(TiledSimplifyError, OSError):
+    """The tile store on disk is missing, not a tile store, or not usable as it is."""
+
+
+class IncompleteStoreError(StoreError):
+    """The store's ingest never finished (it was interrupted): its tiles are not trustworthy."""
+
+
+class StoreExistsError(StoreError, FileExistsError):
+    """A tile store (or other content) is already at the path given for a new store."""
+
+
+class ResultExistsError(TiledSimplifyError, FileExistsError):
+    """A tile already has a finished result and overwriting was not asked for."""
+
+
+def _codec() -> BloscCodec:
+    # lz4 with byte shuffle: ~3x faster to write than the default zstd for float64 at about
+    # the same size; shuffle groups the slowly varying high bytes of coordinates.
+    return BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")
+
+
+# ---------------------------------------------------------------------------- helpers
+def _mix64(x: np.ndarray) -> np.ndarray:
+    """splitmix64 finaliser: a bijective, well-mixed hash of uint64 values (wraps mod 2**64)."""
+    x = x.astype(np.uint64, copy=True)
+    x += np.uint64(0x9E3779B97F4A7C15)
+    x ^= x >> np.uint64(30)
+    x *= np.uint64(0xBF58476D1CE4E5B9)
+    x ^= x >> np.uint64(27)
+    x *= np.uint64(0x94D049BB133111EB)
+    x ^= x >> np.uint64(31)
+    return x
+
+
+def _sample_keys(index: np.ndarray, seed: int) -> np.ndarray:
+    salt = _mix64(np.array([seed & 0xFFFFFFFFFFFFFFFF], dtype=np.uint64))[0]
+    return _mix64(index.astype(np.uint64) ^ salt)
+
+
+def _jsonable(obj: Any, what: str) -> Any:
+    """Return ``obj`` as plain JSON data (numpy scalars/arrays and paths converted)."""
+
+    def conv(o):
+        if isinstance(o, np.generic):
+            return o.item()
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, (Path, os.PathLike)):
+            return os.fspath(o)
+        if isinstance(o, (set, frozenset)):
+            return sorted(o)
+        raise TypeError(f"{type(o).__name__} is not JSON serialisable")
+
+    try:
+        return json.loads(json.dumps(obj, default=conv, allow_nan=False))
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{what} must be JSON-serialisable (numbers must be finite): {exc}") \
+            from None
+
+
+def estimate_spacing(sample_xyz: np.ndarray, n_total: int) -> tuple[float, float]:
+    """Estimate the typical point spacing of the whole cloud from a uniform sample.
+
+    The median distance from each sample point to its nearest other sample point, ``d_s``, is
+    measured with a kd-tree. A sample of ``s`` of the ``n`` points is ``n / s`` times sparser
+    than the cloud; for a *surface-like* cloud (a scan: points on 2-D surfaces) spacing scales
+    as ``density ** -1/2``, so the cloud's spacing is estimated as ``d_s * sqrt(s / n)``. (For a
+    volume-filling cloud the true factor is ``(s / n) ** (1/3)`` and this underestimates; for
+    curve-like data it overestimates.) Zero distances (duplicate points) are ignored when the
+    median would otherwise be zero.
+
+    Parameters
+    ----------
+    sample_xyz : ndarray, shape (s, 3)
+        Uniform random sample of the cloud.
+    n_total : int
+        Number of points of the cloud.
+
+    Returns
+    -------
+    spacing : float
+        Estimated median nearest-neighbour spacing of the whole cloud (0 if it cannot be
+        estimated: fewer than 2 distinct points).
+    sample_median : float
+        The measured median nearest-neighbour distance within the sample, ``d_s``.
+    """
+    s = sample_xyz.shape[0]
+    if s < 2:
+        return 0.0, 0.0
+    d, _ = cKDTree(sample_xyz).query(sample_xyz, k=2, workers=-1)
+    d = d[:, 1]
+    med = float(np.median(d))
+    if med == 0.0:
+        pos = d[d > 0]
+        med = float(np.median(pos)) if pos.size else 0.0
+    return med * float(np.sqrt(min(1.0, s / max(int(n_total), 1)))), med
+
+
+class _ChunkChecker:
+    """Validates chunks and remembers the attribute schema from the first one."""
+
+    def __init__(self):
+        self.spec: dict[str, tuple[np.dtype, tuple[int, ...]]] | None = None
+
+    def __call__(self, item) -> tuple[int, np.ndarray, dict[str, np.ndarray]]:
+        try:
+            start, xyz, attrs = item
+        except (TypeError, ValueError):
+            raise InputError("each chunk must be a tuple (start_index, xyz, attrs)") from None
+        if isinstance(start, (bool, np.bool_)) or not isinstance(start, (int, np.integer)) \
+                or start < 0:
+            raise InputError(f"a chunk's start_index must be a non-negative integer, got "
+                             f"{start!r}")
+        xyz = np.asarray(xyz)
+        if xyz.ndim != 2 or xyz.shape[1] != 3:
+            raise InputError(f"a chunk's xyz must have shape (m, 3), got {xyz.shape} "
+                             f"(chunk starting at {start})")
+        if xyz.dtype != np.float64:
+            if not np.can_cast(xyz.dtype, np.float64, casting="safe"):
+                raise InputError(f"a chunk's xyz must be float64, got {xyz.dtype}")
+            xyz = xyz.astype(np.float64)
+        if not np.isfinite(xyz).all():
+            raise InputError(f"the chunk starting at {start} has NaN or infinite coordinates; "
+                             "drop those points before tiling")
+        m = xyz.shape[0]
+        if attrs is None:
+            attrs = {}
+        if not isinstance(attrs, Mapping):
+            raise InputError(f"a chunk's attrs must be a mapping name -> array, got "
+                             f"{type(attrs).__name__}")
+        out = {}
+        for name, arr in attrs.items():
+            arr = np.asarray(arr)
+            if arr.ndim < 1 or arr.shape[0] != m:
+                raise InputError(f"attribute {name!r} has shape {arr.shape} but the chunk "
+                                 f"starting at {start} has {m} points")
+            out[str(name)] = arr
+        if self.spec is None:
+            spec = {}
+            for name, arr in out.items():
+                if not _NAME_RE.match(name):
+                    raise InputError(f"attribute name {name!r} is not usable as a store key "
+                                     "(use letters, digits, '_', '-', '.'; no '/')")
+                if arr.dtype.kind not in "biuf":
+                    raise InputError(f"attribute {name!r} has dtype {arr.dtype}; only bool, "
+                                     "integer and float attributes can be stored")
+                spec[name] = (arr.dtype, arr.shape[1:])
+            self.spec = spec
+        if set(out) != set(self.spec):
+            raise InputError(f"the chunk starting at {start} has attributes {sorted(out)}, "
+                             f"the first chunk had {sorted(self.spec)}")
+        for name, (dtype, trail) in self.spec.items():
+            arr = out[name]
+            if arr.shape[1:] != trail:
+                raise InputError(f"attribute {name!r} has per-point shape {arr.shape[1:]} in "
+                                 f"the chunk starting at {start}, {trail} in the first chunk")
+            if arr.dtype != dtype:
+                if not np.can_cast(arr.dtype, dtype, casting="safe"):
+                    raise InputError(f"attribute {name!r} is {arr.dtype} in the chunk starting "
+                                     f"at {start} but {dtype} in the first chunk")
+                out[name] = arr.astype(dtype)
+        return int(start), xyz, out
+
+
+class _BottomK:
+    """Uniform sample without replacement of bounded size: keep the k smallest hash keys.
+
+    Each point's key is a seeded hash of its global index, so the sample depends only on the
+    set of points and the seed, not on chunk sizes or chunk order.
+    """
+
+    def __init__(self, k: int, seed: int):
+        self.k, self.seed = k, seed
+        self.keys = np.zeros(0, dtype=np.uint64)
+        self.xyz = np.zeros((0, 3))
+        self.index = np.zeros(0, dtype=np.int64)
+
+    def add(self, start: int, xyz: np.ndarray):
+        idx = np.arange(start, start + xyz.shape[0], dtype=np.int64)
+        keys = _sample_keys(idx, self.seed)
+        if self.keys.size >= self.k:
+            keep = keys < self.keys.max()
+            keys, idx, xyz = keys[keep], idx[keep], xyz[keep]
+            if not keys.size:
+                return
+        keys = np.concatenate([self.keys, keys])
+        idx = np.concatenate([self.index, idx])
+        xyz = np.concatenate([self.xyz, xyz])
+        if keys.size > self.k:
+            sel = np.argpartition(keys, self.k - 1)[: self.k]
+            keys, idx, xyz = keys[sel], idx[sel], xyz[sel]
+        self.keys, self.index, self.xyz = keys, idx, xyz
+
+    def result(self) -> np.ndarray:
+        order = np.argsort(self.index, kind="stable")
+        return self.xyz[order]
+
+
+class _TileBuffer:
+    """Per-tile pending rows, flushed to the zarr arrays in whole chunks where possible."""
+
+    def __init__(self, arrays: dict[str, Any], chunk_rows: int):
+        self.arrays = arrays  # "xyz", "index", "attrs/<name>" -> zarr.Array
+        self.rows = chunk_rows
+        self.pieces: dict[str, list[np.ndarray]] = {k: [] for k in arrays}
+        self.pending = 0
+        self.written = 0
+
+    def add(self, parts: dict[str, np.ndarray]):
+        for k, v in parts.items():
+            self.pieces[k].append(v)
+        self.pending += next(iter(parts.values())).shape[0]
+
+    def flush(self, aligned: bool) -> tuple[int, list]:
+        """Take pending rows out of the buffer as write jobs.
+
+        With ``aligned``, only rows up to the last whole-chunk boundary are taken, so that
+        every write but a tile's last one covers whole zarr chunks (no read-modify-write).
+
+        Returns
+        -------
+        n : int
+            Rows taken.
+        jobs : list of (zarr.Array, start, end, data)
+            Writes to run (in any order, concurrently) with :func:`_run_jobs`.
+        """
+        if not self.pending:
+            return 0, []
+        end = self.written + self.pending
+        if aligned:
+            end = (end // self.rows) * self.rows
+        n = end - self.written
+        if n <= 0:
+            return 0, []
+        jobs = []
+        for k, arr in self.arrays.items():
+            data = np.concatenate(self.pieces[k]) if len(self.pieces[k]) > 1 \
+                else self.pieces[k][0]
+            jobs.append((arr, self.written, end, data[:n]))
+            self.pieces[k] = [data[n:]] if n < data.shape[0] else []
+        self.written = end
+        self.pending -= n
+        return n, jobs
+
+
+def _write_job(job) -> None:
+    arr, start, end, data = job
+    arr.resize((end,) + arr.shape[1:])
+    arr[start:end] = data
+
+
+def _run_jobs(pool: ThreadPoolExecutor, jobs: list) -> None:
+    """Run write jobs concurrently (each touches a different array) and re-raise errors."""
+    for f in [pool.submit(_write_job, j) for j in jobs]:
+        f.result()
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def _package_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("tiledsimplify")
+    except Exception:  # noqa: BLE001 - not installed as a distribution
+        return "unknown"
+
+
+# ---------------------------------------------------------------------------- the store
+class TileStore:
+    """Tiles of a point cloud in a zarr v3 group directory.
+
+    Create one with :meth:`create` (streams the input twice) and reopen it with :meth:`open`.
+    Core data is read-only after creation; per-tile results are written with
+    :meth:`write_result`. Different processes may write results of *different* tiles at the
+    same time (each tile's result lives in its own group); one tile must not be written by two
+    processes at once.
+    """
+
+    def __init__(self, path, root: zarr.Group):
+        """Wrap an opened root group; use :meth:`open` or :meth:`create` instead."""
+        self.path = Path(path)
+        self._store = root.store
+        self._root = root
+        a = dict(root.attrs)
+        self._attrs = a
+        self.plan = TilePlan.from_dict(a["plan"])
+        self._arrays: dict[tuple[int, str], Any] = {}
+
+    # ------------------------------------------------------------------ creation
+    @classmethod
+    def create(cls, path, chunks: ChunkSource, *, tile_points: int, halo: float | None = None,
+               config: dict, provenance: dict, sample_size: int = 200_000, seed: int = 0,
+               n_total: int | None = None, chunk_rows: int | None = None,
+               buffer_points: int = 2_000_000, overwrite: bool = False) -> "TileStore":
+        """Stream a point cloud into a new tile store.
+
+        Pass 1 reads every chunk once to count the points, check that the chunks cover
+        ``0..n-1`` exactly once, take the bounding box and draw a uniform sample of at most
+        ``sample_size`` points (bottom-k of a seeded hash of the global index: a reservoir
+        sample independent of how the input is chunked). From the sample it estimates the
+        point spacing (:func:`estimate_spacing`) and plans the tiles (:func:`plan_tiles`).
+        Pass 2 reads the chunks again, assigns each point to its tile and appends it to the
+        tile's arrays. ``complete`` is set in the root attributes only at the very end.
+
+        Parameters
+        ----------
+        path : str or Path
+            Directory of the new store. It must not exist, be empty, or (with ``overwrite``)
+            be an existing tile store.
+        chunks : callable
+            ``chunks()`` returns a fresh iterable of ``(start_index, xyz, attrs)``; it is
+            called twice and must give the same chunks both times.
+        tile_points : int
+            Target maximum number of points per tile core.
+        halo : float, optional
+            Width of the frozen margin around each tile. Default ``10 * spacing`` (ten typical
+            point spacings: enough neighbours around a tile edge for local surface fits).
+        config : dict
+            The run's configuration (JSON-serialisable), stored as is.
+        provenance : dict
+            Where the data came from (JSON-serialisable); package/zarr/numpy versions and the
+            creation time are added.
+        sample_size : int, default 200_000
+            Size of the planning sample (memory: ~32 bytes per sample point).
+        seed : int, default 0
+            Seed of the sample; the plan is deterministic for a given input and seed.
+        n_total : int, optional
+            Expected number of points, checked against the input when given.
+        chunk_rows : int, optional
+            Rows per zarr chunk. Default: ``tile_points`` rounded up to a power of two,
+            clamped to 4,096..65,536.
+        buffer_points : int, default 2_000_000
+            Maximum points held in the write buffer across all tiles (each tile's rows are
+            buffered until a whole zarr chunk can be written).
+        overwrite : bool, default False
+            Replace an existing tile store at ``path``.
+
+        Returns
+        -------
+        TileStore
+            The new store, opened for reading and result writing.
+
+        Raises
+        ------
+        InputError
+            Bad chunks, empty input, inconsistent passes or bad options.
+        StoreExistsError
+            ``path`` holds something and ``overwrite`` is false (or it is not a tile store).
+        """
+        if not callable(chunks):
+            raise InputError("chunks must be a callable returning a fresh iterable of chunks "
+                             "(it is read twice)")
+        tile_points = int(tile_points)
+        if tile_points < 1:
+            raise InputError(f"tile_points must be >= 1, got {tile_points}")
+        sample_size = int(sample_size)
+        if sample_size < 2:
+            raise InputError(f"sample_size must be >= 2, got {sample_size}")
+        if halo is not None:
+            halo = float(halo)
+            if not (np.isfinite(halo) and halo >= 0):
+                raise InputError(f"halo must be a finite distance >= 0, got {halo}")
+        if chunk_rows is None:
+            chunk_rows = int(min(DEFAULT_CHUNK_ROWS, max(4096, 1 << (tile_points - 1)
+                                                          .bit_length())))
+        chunk_rows = int(chunk_rows)
+        if chunk_rows < 1:
+            raise InputError(f"chunk_rows must be >= 1, got {chunk_rows}")
+        buffer_points = max(int(buffer_points), 1)
+        config = _jsonable(config if config is not None else {}, "config")
+        provenance = _jsonable(provenance if provenance is not None else {}, "provenance")
+        if not isinstance(config, dict) or not isinstance(provenance, dict):
+            raise InputError("config and provenance must be dicts")
+        path = Path(path)
+        cls._prepare_path(path, overwrite)
+
+        # ---- pass 1: count, cover check, bounds, sample
+        check = _ChunkChecker()
+        sampler = _BottomK(sample_size, seed)
+        intervals: list[tuple[int, int]] = []
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for item in chunks():
+            start, xyz, _ = check(item)
+            m = xyz.shape[0]
+            intervals.append((start, m))
+            if not m:
+                continue
+            lo = np.minimum(lo, xyz.min(axis=0))
+            hi = np.maximum(hi, xyz.max(axis=0))
+            sampler.add(start, xyz)
+        n = cls._check_cover(intervals, n_total)
+        sample = sampler.result()
+        spacing, sample_median = estimate_spacing(sample, n)
+        halo_is_default = halo is None
+        if halo is None:
+            halo = HALO_SPACINGS * spacing
+        bounds = np.stack([lo, hi])
+        plan = plan_tiles(sample, n, tile_points, bounds=bounds)
+        del sample, sampler
+        spec = check.spec or {}
+
+        attrs = {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "complete": False,
+            "plan": plan.to_dict(),
+            "n_tiles": plan.n_tiles,
+            "halo": float(halo),
+            "halo_is_default": halo_is_default,
+            "spacing": float(spacing),
+            "spacing_estimate": {
+                "method": "median nearest-neighbour distance in the sample times "
+                          "sqrt(sample_size / n_total) (surface-like cloud)",
+                "sample_median": sample_median,
+                "sample_size": int(min(sample_size, n)),
+            },
+            "n_total": n,
+            "tile_points": tile_points,
+            "bounds": bounds.tolist(),
+            "chunk_rows": chunk_rows,
+            "attributes": {k: {"dtype": dt.str, "shape": list(tr)} for k, (dt, tr)
+                           in spec.items()},
+            "sample_size": sample_size,
+            "seed": int(seed),
+            "config": config,
+            "provenance": {**provenance,
+                           "tiledsimplify_version": _package_version(),
+                           "zarr_version": zarr.__version__,
+                           "numpy_version": np.__version__,
+                           "created_utc": _now()},
+        }
+        # ---- layout: the root (marked incomplete) first, then all tile groups and empty
+        # arrays at once (concurrent metadata writes)
+        store = LocalStore(path)
+        root = zarr.open_group(store, mode="w", attributes=attrs)
+        templates = cls._array_templates(spec, chunk_rows)
+        nodes: dict[str, Any] = {"tiles": GroupMetadata()}
+        for t in range(plan.n_tiles):
+            nodes[f"tiles/{t}"] = GroupMetadata()
+            nodes[f"tiles/{t}/attrs"] = GroupMetadata()
+            for key, meta in templates.items():
+                nodes[f"tiles/{t}/{key}"] = meta
+        made = dict(zarr.create_hierarchy(store=store, nodes=nodes))
+
+        # ---- pass 2: assign and append
+        buffers = [_TileBuffer({key: made[f"tiles/{t}/{key}"] for key in templates}, chunk_rows)
+                   for t in range(plan.n_tiles)]
+        del made
+        pending_total = 0
+        check2 = _ChunkChecker()
+        check2.spec = check.spec
+        k = 0
+        with ThreadPoolExecutor(max_workers=_WRITE_THREADS) as pool:
+            for item in chunks():
+                start, xyz, a = check2(item)
+                m = xyz.shape[0]
+                if k >= len(intervals) or intervals[k] != (start, m):
+                    raise InputError(
+                        "the chunk source gave different chunks on the second pass (chunk "
+                        f"{k}: expected (start, size) "
+                        f"{intervals[k] if k < len(intervals) else None}, got {(start, m)}); "
+                        "it must be re-iterable and deterministic")
+                k += 1
+                if not m:
+                    continue
+                tile = plan.assign(xyz)
+                order = np.argsort(tile, kind="stable")
+                counts = np.bincount(tile, minlength=plan.n_tiles)
+                edges = np.concatenate([[0], np.cumsum(counts)])
+                index = np.arange(start, start + m, dtype=np.int64)[order]
+                xyz_s = xyz[order]
+                attrs_s = {f"attrs/{nm}": v[order] for nm, v in a.items()}
+                jobs = []
+                for t in np.flatnonzero(counts):
+                    s, e = edges[t], edges[t + 1]
+                    parts = {"xyz": xyz_s[s:e], "index": index[s:e]}
+                    for key, v in attrs_s.items():
+                        parts[key] = v[s:e]
+                    buf = buffers[t]
+                    buf.add(parts)
+                    pending_total += e - s
+                    if buf.pending >= chunk_rows:
+                        taken, new = buf.flush(aligned=True)
+                        pending_total -= taken
+                        jobs += new
+                if pending_total > buffer_points:
+                    # Over budget: empty the fullest buffers (partial chunks) to half budget.
+                    for t in np.argsort([-b.pending for b in buffers], kind="stable"):
+                        if pending_total <= buffer_points // 2:
+                            break
+                        taken, new = buffers[t].flush(aligned=False)
+                        pending_total -= taken
+                        jobs += new
+                _run_jobs(pool, jobs)
+                del jobs
+            if k != len(intervals):
+                raise InputError(f"the chunk source gave {k} chunks on the second pass but "
+                                 f"{len(intervals)} on the first; it must be re-iterable")
+            for b in buffers:
+                _run_jobs(pool, b.flush(aligned=False)[1])
+        tile_counts = [b.written for b in buffers]
+        if sum(tile_counts) != n:  # pragma: no cover - guarded by the checks above
+            raise StoreError(f"internal error: wrote {sum(tile_counts)} of {n} points")
+        root.update_attributes({"tile_counts": tile_counts, "complete": True})
+        return cls.open(path)
+
+    @staticmethod
+    def _prepare_path(path: Path, overwrite: bool):
+        if path.exists() and not path.is_dir():
+            raise StoreExistsError(f"{path} exists and is not a directory; choose a fresh "
+                                   "store path")
+        if path.is_dir() and any(path.iterdir()):
+            is_store = False
+            meta = path / "zarr.json"
+            if meta.is_file():
+                try:
+                    is_store = json.loads(meta.read_text()).get("attributes", {}) \
+                        .get("format") == FORMAT
+                except (OSError, ValueError):
+                    is_store = False
+            if not is_store:
+                raise StoreExistsError(f"{path} is not empty and is not a tile store; refusing "
+                                       "to write there. Choose a fresh store path.")
+            if not overwrite:
+                raise StoreExistsError(f"a tile store already exists at {path}; delete it, "
+                                       "pass overwrite=True, or choose a fresh store path")
+
+    @staticmethod
+    def _check_cover(intervals: list[tuple[int, int]], n_total: int | None) -> int:
+        spans = sorted((s, m) for s, m in intervals if m)
+        n = 0
+        for s, m in spans:
+            if s != n:
+                what = "overlap" if s < n else "leave a gap"
+                raise InputError(f"chunk start indices {what} at index {min(s, n)}: the chunks "
+                                 "must cover 0..n-1 exactly once")
+            n += m
+        if n == 0:
+            raise InputError("the input has no points")
+        if n_total is not None and int(n_total) != n:
+            raise InputError(f"n_total was given as {n_total} but the chunks hold {n} points")
+        return n
+
+    @staticmethod
+    def _array_templates(spec, chunk_rows: int) -> dict[str, Any]:
+        """Metadata of the empty per-tile arrays, made once in memory and reused."""
+        mem = zarr.open_group(MemoryStore(), mode="w")
+        out = {}
+
+        def make(key, dtype, trail):
+            arr = mem.create_array(key.replace("/", "_"), shape=(0,) + tuple(trail),
+                                   dtype=dtype, chunks=(chunk_rows,) + tuple(trail),
+                                   compressors=_codec(), fill_value=0)
+            out[key] = arr.metadata
+
+        make("xyz", np.float64, (3,))
+        make("index", np.int64, ())
+        for name, (dtype, trail) in spec.items():
+            make(f"attrs/{name}", dtype, trail)
+        return out
+
+    # ------------------------------------------------------------------ opening
+    @classmethod
+    def open(cls, path) -> "TileStore":
+        """Open an existing, completely ingested tile store.
+
+        Raises
+        ------
+        StoreError
+            No store at ``path``, or not a tile store (or of an unsupported version).
+        IncompleteStoreError
+            The ingest that created the store did not finish.
+        """
+        path = Path(path)
+        if not (path / "zarr.json").is_file():
+            raise StoreError(f"no tile store at {path} (no zarr.json there)")
+        try:
+            root = zarr.open_group(LocalStore(path), mode="r+")
+            attrs = dict(root.attrs)
+        except (OSError, ValueError, KeyError) as exc:
+            raise StoreError(f"{path} could not be opened as a zarr v3 group: {exc}") from exc
+        if attrs.get("format") != FORMAT:
+            raise StoreError(f"{path} is a zarr group but not a tiledsimplify tile store (it "
+                             "may be the remains of a creation interrupted at its very start); "
+                             "delete it or use a fresh --store path")
+        if attrs.get("format_version") != FORMAT_VERSION:
+            raise StoreError(f"{path} has tile store format version "
+                             f"{attrs.get('format_version')!r}; this version reads "
+                             f"{FORMAT_VERSION}. Re-create the store.")
+        if attrs.get("complete") is not True:
+            raise IncompleteStoreError(
+                f"the tile store at {path} is incomplete: its ingest was interrupted before "
+                "finishing. Delete the directory (or use a fresh --store path) and run again.")
+        return cls(path, root)
+
+    # ------------------------------------------------------------------ facts
+    @property
+    def n_tiles(self) -> int:
+        """Number of tiles."""
+        return self.plan.n_tiles
+
+    @property
+    def halo(self) -> float:
+        """Width of the frozen margin used by :meth:`halo_points`."""
+        return float(self._attrs["halo"])
+
+    @property
+    def spacing(self) -> float:
+        """Estimated median nearest-neighbour spacing of the cloud (see
+        :func:`estimate_spacing`)."""
+        return float(self._attrs["spacing"])
+
+    @property
+    def config(self) -> dict:
+        """The configuration dict given at creation."""
+        return dict(self._attrs["config"])
+
+    @property
+    def provenance(self) -> dict:
+        """The provenance dict given at creation, plus versions and creation time."""
+        return dict(self._attrs["provenance"])
+
+    @property
+    def n_total(self) -> int:
+        """Number of points of the input."""
+        return int(self._attrs["n_total"])
+
+    @property
+    def tile_points(self) -> int:
+        """Target maximum tile size given at creation."""
+        return int(self._attrs["tile_points"])
+
+    @property
+    def tile_counts(self) -> np.ndarray:
+        """Number of core points of each tile, shape (n_tiles,)."""
+        return np.asarray(self._attrs["tile_counts"], dtype=np.int64)
+
+    @property
+    def attribute_names(self) -> list[str]:
+        """Names of the per-point attributes stored."""
+        return list(self._attrs["attributes"])
+
+    @property
+    def attribute_dtypes(self) -> dict[str, np.dtype]:
+        """Dtype of each stored attribute."""
+        return {k: np.dtype(v["dtype"]) for k, v in self._attrs["attributes"].items()}
+
+    @property
+    def root_attrs(self) -> dict:
+        """All root attributes (a copy)."""
+        return json.loads(json.dumps(self._attrs))
+
+    def _tile(self, tile) -> int:
+        return self.plan._check_tile(tile)
+
+    def _array(self, tile: int, key: str):
+        arr = self._arrays.get((tile, key))
+        if arr is None:
+            try:
+                arr = self._root[f"tiles/{tile}/{key}"]
+            except KeyError:
+                raise StoreError(f"tile {tile} of the store at {self.path} has no array "
+                                 f"{key!r}; the store is damaged") from None
+            self._arrays[(tile, key)] = arr
+        return arr
+
+    # ------------------------------------------------------------------ reading
+    def count(self, tile: int) -> int:
+        """Number of core points of a tile."""
+        return int(self.tile_counts[self._tile(tile)])
+
+    def box(self, tile: int) -> tuple[np.ndarray, np.ndarray]:
+        """The tile's box ``(lo, hi)`` clipped to the cloud's bounding box."""
+        return self.plan.box(tile, clip=True)
+
+    def neighbours(self, tile: int, halo: float | None = None) -> np.ndarray:
+        """Tiles within ``halo`` (default :attr:`halo`) of this tile (see
+        :meth:`TilePlan.neighbours`)."""
+        return self.plan.neighbours(tile, self.halo if halo is None else halo)
+
+    def core(self, tile: int) -> tuple[np.ndarray, np.ndarray]:
+        """Read a tile's core points.
+
+        Returns
+        -------
+        xyz : ndarray of float64, shape (k, 3)
+        index : ndarray of int64, shape (k,)
+            Global input index of each point, in the order the points were read.
+        """
+        t = self._tile(tile)
+        return self._array(t, "xyz")[:], self._array(t, "index")[:]
+
+    def halo_points(self, tile: int, halo: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Read the points of other tiles that lie within ``halo`` of this tile's box.
+
+        The test is the expanded box: a point ``p`` of another tile is returned when
+        ``lo - halo <= p <= hi + halo`` on every axis (a superset of the points within
+        Euclidean distance ``halo``). Only the cores of :meth:`neighbours` are read, one at a
+        time, so memory is bounded by one tile plus the result.
+
+        Parameters
+        ----------
+        tile : int
+        halo : float, optional
+            Defaults to the store's :attr:`halo`.
+
+        Returns
+        -------
+        xyz : ndarray of float64, shape (h, 3)
+        index : ndarray of int64, shape (h,)
+            Sorted by global index.
+        """
+        t = self._tile(tile)
+        h = self.halo if halo is None else float(halo)
+        lo, hi = self.plan.lo[t] - h, self.plan.hi[t] + h
+        xs, js = [np.zeros((0, 3))], [np.zeros(0, dtype=np.int64)]
+        for j in self.plan.neighbours(t, h):
+            if not self.tile_counts[j]:
+                continue
+            xyz, idx = self.core(j)
+            sel = ((xyz >= lo) & (xyz <= hi)).all(axis=1)
+            xs.append(xyz[sel])
+            js.append(idx[sel])
+        xyz, idx = np.concatenate(xs), np.concatenate(js)
+        order = np.argsort(idx, kind="stable")
+        return xyz[order], idx[order]
+
+    def attrs(self, tile: int, names: Iterable[str] | None = None) -> dict[str, np.ndarray]:
+        """Read per-point attributes of a tile's core points.
+
+        Parameters
+        ----------
+        tile : int
+        names : iterable of str, optional
+            Attribute names; default all.
+
+        Returns
+        -------
+        dict
+            name -> array of shape (k, ...), in the same order as :meth:`core`.
+        """
+        t = self._tile(tile)
+        if isinstance(names, str):
+            names = [names]
+        names = self.attribute_names if names is None else list(names)
+        unknown = [n for n in names if n not in self._attrs["attributes"]]
+        if unknown:
+            raise InputError(f"unknown attribute(s) {unknown}; the store has "
+                             f"{self.attribute_names}")
+        return {n: self._array(t, f"attrs/{n}")[:] for n in names}
+
+    # ------------------------------------------------------------------ results
+    def _result_group(self, tile: int):
+        try:
+            return zarr.open_group(self._store, path=f"tiles/{tile}/result", mode="r")
+        except (FileNotFoundError, KeyError):
+            return None
+
+    def is_done(self, tile: int) -> bool:
+        """Whether a tile's result was completely written (read fresh from disk)."""
+        g = self._result_group(self._tile(tile))
+        return g is not None and g.attrs.get("done") is True
+
+    def done_tiles(self) -> list[int]:
+        """Ids of the tiles whose result is completely written, ascending."""
+        return [t for t in range(self.n_tiles) if self.is_done(t)]
+
+    def pending_tiles(self) -> list[int]:
+        """Ids of the tiles still without a complete result, ascending."""
+        return [t for t in range(self.n_tiles) if not self.is_done(t)]
+
+    def result_names(self, tile: int) -> list[str]:
+        """Names of a done tile's result arrays (empty if not done)."""
+        g = self._result_group(self._tile(tile))
+        if g is None or g.attrs.get("done") is not True:
+            return []
+        return list(g.attrs.get("names", []))
+
+    def write_result(self, tile: int, arrays: Mapping[str, Any], *,
+                     overwrite: bool = False) -> None:
+        """Write a tile's result arrays, then mark the tile done.
+
+        Each array runs over the tile's core points (first dimension = :meth:`count`). The
+        arrays go to ``tiles/<id>/result/<name>``; only when all are written is the result
+        group's attribute ``done`` set, so a crash part-way leaves the tile not done and a
+        later run simply writes it again. Any earlier (partial or, with ``overwrite``, done)
+        result of the tile is removed first.
+
+        Parameters
+        ----------
+        tile : int
+        arrays : mapping name -> array_like
+            Numeric or bool arrays of shape (count, ...).
+        overwrite : bool, default False
+            Replace a tile that is already done.
+
+        Raises
+        ------
+        ResultExistsError
+            The tile is done and ``overwrite`` is false.
+        InputError
+            Bad names or array lengths.
+        """
+        t = self._tile(tile)
+        k = self.count(t)
+        data = {}
+        for name, arr in arrays.items():
+            name = str(name)
+            if not _NAME_RE.match(name):
+                raise InputError(f"result name {name!r} is not usable as a store key (use "
+                                 "letters, digits, '_', '-', '.')")
+            arr = np.asarray(arr)
+            if arr.ndim < 1 or arr.shape[0] != k:
+                raise InputError(f"result {name!r} has shape {arr.shape} but tile {t} has {k} "
+                                 "core points")
+            if arr.dtype.kind not in "biuf":
+                raise InputError(f"result {name!r} has dtype {arr.dtype}; only bool, integer "
+                                 "and float arrays can be stored")
+            data[name] = arr
+        tg = zarr.open_group(self._store, path=f"tiles/{t}", mode="r+")
+        if "result" in tg:
+            old = zarr.open_group(self._store, path=f"tiles/{t}/result", mode="r+")
+            if old.attrs.get("done") is True:
+                if not overwrite:
+                    raise ResultExistsError(f"tile {t} already has a finished result; pass "
+                                            "overwrite=True to replace it")
+                old.update_attributes({"done": False})
+            del tg["result"]
+        rows = int(self._attrs["chunk_rows"])
+        rg = tg.create_group("result", attributes={"done": False})
+        for name, arr in data.items():
+            rg.create_array(name, data=arr, chunks=(rows,) + arr.shape[1:],
+                            compressors=_codec())
+        rg.update_attributes({"done": True, "names": list(data), "written_utc": _now()})
+
+    def read_result(self, tile: int, name: str) -> np.ndarray:
+        """Read one result array of a done tile.
+
+        Raises
+        ------
+        InputError
+            The tile is not done or has no such result.
+        """
+        t = self._tile(tile)
+        g = self._result_group(t)
+        if g is None or g.attrs.get("done") is not True:
+            raise InputError(f"tile {t} has no finished result yet")
+        names = list(g.attrs.get("names", []))
+        if name not in names:
+            raise InputError(f"tile {t} has no result {name!r}; it has {names}")
+        return g[name][:]
+
+    def __repr__(self) -> str:
+        return (f"TileStore({str(self.path)!r}, n_tiles={self.n_tiles}, "
+                f"n_total={self.n_total}, halo={self.halo:g})")
