@@ -46,7 +46,71 @@ def _parser():
                    help="fixed threshold on the normal-deviation measure (default: automatic)")
     s.add_argument("--no-boundary", action="store_true", help="do not flag sharp-edge points")
     s.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
+
+    r = sub.add_parser(
+        "run", help="simplify a cloud of any size, tile by tile, in parallel",
+        description="Stream the input into a zarr tile store, simplify every tile with its "
+                    "halo frozen (dask), cut all tiles at one global budget and write one "
+                    "output. LAS/LAZ output keeps every input dimension and adds sharp_edge, "
+                    "importance, simplify_rank.")
+    r.add_argument("input", help="LAS/LAZ file, folder or glob of LAS/LAZ tiles; or PLY, "
+                                 "XYZ/CSV/TXT, NPY")
+    r.add_argument("output", help="output .las/.laz (LAS input), .ply, .npy, .xyz or .csv")
+    g = r.add_mutually_exclusive_group()
+    g.add_argument("--ratio", type=float, help="fraction of points to keep, in (0, 1]")
+    g.add_argument("--count", type=int, help="number of points to keep")
+    r.add_argument("--config", help="TOML file: [run] ratio/count/tile_points/halo/scheduler/"
+                                    "workers, [simplify] core options (see configs/)")
+    r.add_argument("--scheduler", default=None,
+                   help="threads (default), processes, synchronous, or tcp://HOST:PORT")
+    r.add_argument("--workers", type=int, default=None, help="local workers")
+    r.add_argument("--store", default=None,
+                   help="zarr tile store directory (default: temporary); reuse it to resume")
+    r.add_argument("--tile-points", type=int, default=None, help="points per tile (500000)")
+    r.add_argument("--halo", type=float, default=None,
+                   help="halo width in model units (default: 10 x estimated spacing)")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
     return p
+
+
+def _load_config(path):
+    import tomllib
+    try:
+        with open(path, "rb") as fh:
+            cfg = tomllib.load(fh)
+    except FileNotFoundError:
+        raise
+    except tomllib.TOMLDecodeError as exc:
+        raise TiledSimplifyError(f"{path}: not valid TOML ({exc}); fix the file.") from None
+    unknown = sorted(set(cfg) - {"run", "simplify"})
+    if unknown:
+        raise TiledSimplifyError(f"{path}: unknown section(s) {unknown}; use [run] and "
+                                 "[simplify].")
+    return cfg.get("run", {}), cfg.get("simplify", {})
+
+
+def _run(args):
+    from .pipeline import run
+    run_cfg, simplify_cfg = _load_config(args.config) if args.config else ({}, {})
+    known = {"ratio", "count", "scheduler", "workers", "tile_points", "halo"}
+    unknown = sorted(set(run_cfg) - known)
+    if unknown:
+        raise TiledSimplifyError(f"{args.config}: unknown [run] key(s) {unknown}; known: "
+                                 f"{sorted(known)}.")
+    for key in known:  # command line wins over the config file
+        value = getattr(args, key)
+        if value is not None:
+            run_cfg[key] = value
+    if "ratio" in run_cfg and "count" in run_cfg and (args.ratio is not None
+                                                      or args.count is not None):
+        run_cfg.pop("count" if args.ratio is not None else "ratio")
+    summary = run(args.input, args.output, ratio=run_cfg.get("ratio"),
+                  count=run_cfg.get("count"), options=SimplifyOptions.from_mapping(simplify_cfg),
+                  scheduler=run_cfg.get("scheduler", "threads"), workers=run_cfg.get("workers"),
+                  store=args.store, tile_points=run_cfg.get("tile_points", 500_000),
+                  halo=run_cfg.get("halo"), progress=not (args.no_progress or args.quiet))
+    return EXIT_OK if summary.reached else EXIT_BUDGET
 
 
 def _simplify(args):
@@ -82,7 +146,7 @@ def main(argv=None):
     logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
                         format="%(asctime)s %(levelname)s %(message)s", stream=sys.stderr)
     try:
-        return _simplify(args)
+        return _run(args) if args.command == "run" else _simplify(args)
     except FileNotFoundError as exc:
         log.error("%s: file not found. Check the path.", exc.filename or exc)
         return EXIT_INPUT

@@ -724,6 +724,19 @@ class TileStore:
         """All root attributes (a copy)."""
         return json.loads(json.dumps(self._attrs))
 
+    @property
+    def run_attrs(self) -> dict:
+        """Values a run stored for itself (:meth:`set_run_attrs`), e.g. a global threshold."""
+        return dict(self._attrs.get("run", {}))
+
+    def set_run_attrs(self, values: Mapping[str, Any]) -> None:
+        """Merge JSON-serialisable ``values`` into the root attribute ``run``."""
+        run = self.run_attrs
+        run.update(json.loads(json.dumps(dict(values))))
+        root = zarr.open_group(self._store, mode="r+")
+        root.update_attributes({"run": run})
+        self._attrs["run"] = run
+
     def _tile(self, tile) -> int:
         return self.plan._check_tile(tile)
 

@@ -1,0 +1,158 @@
+"""The tiled pipeline: exact global count, agreement with the untiled core, the same output for
+every scheduler, resume, LAS/LAZ end to end, and the command line."""
+
+import shutil
+
+import laspy
+import numpy as np
+import pytest
+
+from tiledsimplify import simplify_points
+from tiledsimplify.cli import EXIT_OK, main
+from tiledsimplify.io import read_points
+from tiledsimplify.pipeline import run
+from tiledsimplify.pipeline.budget import global_cut, tile_sequence
+from tiledsimplify.pipeline.tile_task import BINS, threshold_from_histogram
+from tiledsimplify.tiles import TileStore
+
+
+@pytest.fixture(scope="module")
+def bunny(data_dir, tmp_path_factory):
+    X = read_points(data_dir / "meshes" / "stanford_bunny" / "bun_zipper_res2.ply.gz")
+    path = tmp_path_factory.mktemp("in") / "bunny.npy"
+    np.save(path, X)
+    return X, path
+
+
+def _keep_from_store(store, n):
+    ts = TileStore.open(store)
+    seqs = {i: tile_sequence(ts.read_result(i, "step"), ts.read_result(i, "importance"))
+            for i in range(ts.n_tiles)}
+    return ts, seqs
+
+
+def test_global_cut_is_exact_and_prefers_flat_tiles():
+    flat = np.linspace(0.0, 0.1, 100)
+    curved = np.linspace(0.0, 10.0, 100)
+    noisy = np.array([0.0, 5.0, 0.1, 0.2, 0.3])  # running max 5 from step 1 on
+    cut = global_cut({0: flat, 1: curved, 2: noisy}, 120)
+    assert sum(cut.values()) == 120
+    assert cut[0] == 100 and cut[2] == 1 and cut[1] == 19
+    assert sum(global_cut({0: flat}, 1000).values()) == 100
+
+
+def test_threshold_from_histogram_matches_exact_rule():
+    from tiledsimplify.core.boundary import automatic_threshold
+    rng = np.random.default_rng(0)
+    v = np.r_[rng.gamma(2.0, 0.02, 20000), rng.uniform(0.5, 1.5, 2000)]
+    hist = np.histogram(v, bins=BINS)[0]
+    assert threshold_from_histogram(hist, 3.0, 0.0) == pytest.approx(
+        automatic_threshold(v, 3.0, 0.0), rel=0.01)
+
+
+def test_tiled_run_exact_count_and_agrees_with_untiled(bunny, tmp_path):
+    X, path = bunny
+    store = tmp_path / "store"
+    out = tmp_path / "out.npy"
+    s = run(path, out, ratio=0.2, tile_points=1200, store=store)
+    assert s.n_tiles >= 8 and s.reached
+    t = np.load(out)
+    assert len(t) == s.target == round(0.2 * len(X))
+    # kept points are input points, in input order, each once
+    kept = np.stack([t["x"], t["y"], t["z"]], 1)
+    idx = np.flatnonzero((X[:, None, :] == kept[None, :, :]).all(-1).any(1))
+    assert len(idx) == len(kept)
+    # boundary flags and normals of core points, with the same threshold, equal the untiled
+    # run wherever the halo covers the neighbourhoods (all but a few points)
+    ts, _ = _keep_from_store(store, len(X))
+    untiled = simplify_points(X, ratio=0.2, options={"boundary_threshold": s.threshold})
+    agree = n = 0
+    for i in range(ts.n_tiles):
+        _, gi = ts.core(i)
+        b = ts.read_result(i, "boundary")
+        agree += int((b == untiled.boundary[gi]).sum())
+        n += len(gi)
+        nrm = ts.read_result(i, "normal")
+        cos = np.abs(np.sum(nrm * untiled.normals[gi], axis=1))
+        assert np.median(cos) > 0.9999
+    assert agree / n > 0.99
+    # the untiled automatic threshold is what the tiles shared
+    assert s.threshold == pytest.approx(simplify_points(X, ratio=1.0).threshold, rel=0.01)
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as c, distributed.Client(c) as client:
+        yield client
+
+
+def test_same_output_for_every_scheduler(bunny, tmp_path, cluster):
+    X, path = bunny
+    outs = {}
+    for name, kw in [("threads", {"scheduler": "threads", "workers": 2}),
+                     ("synchronous", {"scheduler": "synchronous"}),
+                     ("processes", {"scheduler": "processes", "workers": 2}),
+                     ("cluster", {"client": cluster})]:
+        out = tmp_path / f"{name}.npy"
+        run(path, out, ratio=0.15, tile_points=1500, **kw)
+        outs[name] = out.read_bytes()
+    assert len(set(outs.values())) == 1
+
+
+def test_resume_finishes_the_remaining_tiles(bunny, tmp_path):
+    X, path = bunny
+    store = tmp_path / "store"
+    full = tmp_path / "full.npy"
+    run(path, full, ratio=0.2, tile_points=1500, store=store)
+    # an interrupted run: some tiles have no (finished) result
+    import zarr
+    for t in (0, 3, 5):
+        del zarr.open_group(str(store), mode="r+")[f"tiles/{t}/result"]
+    assert len(TileStore.open(store).pending_tiles()) == 3
+    resumed = tmp_path / "resumed.npy"
+    run(path, resumed, ratio=0.2, tile_points=1500, store=store)
+    assert resumed.read_bytes() == full.read_bytes()
+    # the same store for other settings is refused, with the fix in the message
+    with pytest.raises(ValueError, match="new --store"):
+        run(path, tmp_path / "x.npy", ratio=0.2, tile_points=999, store=store)
+
+
+def test_las_end_to_end_keeps_every_dimension(data_dir, tmp_path):
+    src = data_dir / "lidar" / "autzen_trim.laz"
+    out = tmp_path / "out.laz"
+    s = run(src, out, ratio=0.5, tile_points=30000)
+    assert s.reached
+    a, b = laspy.read(src), laspy.read(out)
+    assert len(b.points) == round(0.5 * len(a.points))
+    assert b.header.point_format.id == a.header.point_format.id
+    np.testing.assert_array_equal(b.header.scales, a.header.scales)
+    np.testing.assert_array_equal(b.header.offsets, a.header.offsets)
+    names = set(b.point_format.dimension_names)
+    assert set(a.point_format.dimension_names) <= names
+    assert {"sharp_edge", "importance", "simplify_rank"} <= names
+    # every output record is an input record, attributes intact
+    ka = np.stack([a.X, a.Y, a.Z, a.gps_time * 1e6], 1)
+    kb = np.stack([b.X, b.Y, b.Z, b.gps_time * 1e6], 1)
+    ia = {tuple(r): i for i, r in enumerate(ka)}
+    rows = [ia[tuple(r)] for r in kb]
+    for dim in ("intensity", "classification", "red", "green", "blue", "return_number"):
+        np.testing.assert_array_equal(np.asarray(b[dim]), np.asarray(a[dim])[rows])
+    assert int(np.asarray(b["sharp_edge"]).sum()) == s.n_boundary
+
+
+def test_cli_run_with_config(bunny, tmp_path):
+    X, path = bunny
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[run]\nratio = 0.3\ntile_points = 2000\n[simplify]\nmode = 'paper'\n")
+    out = tmp_path / "o.npy"
+    assert main(["run", str(path), str(out), "--config", str(cfg), "--no-progress", "-q"]) \
+        == EXIT_OK
+    assert len(np.load(out)) == round(0.3 * len(X))
+    assert main(["run", str(path), str(out), "--count", "4000", "--no-progress", "-q",
+                 "--tile-points", "3000"]) == EXIT_OK
+    assert len(np.load(out)) == 4000
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[runn]\nratio = 0.3\n")
+    assert main(["run", str(path), str(out), "--config", str(bad), "-q"]) == 2
