@@ -156,3 +156,58 @@ def test_cli_run_with_config(bunny, tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[runn]\nratio = 0.3\n")
     assert main(["run", str(path), str(out), "--config", str(bad), "-q"]) == 2
+
+
+def _seam_band(X, ts, width):
+    """Points within ``width`` of an internal face of their tile's box."""
+    tile = ts.plan.assign(X)
+    d = np.full(len(X), np.inf)
+    for i in range(ts.n_tiles):
+        lo, hi = ts.box(i)
+        m = tile == i
+        for ax in range(3):
+            for face in (lo[ax], hi[ax]):
+                if np.isfinite(face) and X[:, ax].min() < face < X[:, ax].max():
+                    d[m] = np.minimum(d[m], np.abs(X[m, ax] - face))
+    return d < width
+
+
+@pytest.mark.parametrize("case", ["bunny", "fandisk_scan"])
+def test_tiles_do_not_show(case, bunny, data_dir, tmp_path):
+    from tiledsimplify import metrics, synthetic
+    from tiledsimplify.io import read_mesh
+    if case == "bunny":
+        X, path = read_points(data_dir / "meshes" / "stanford_bunny" / "bun_zipper.ply.gz"), None
+        ratio, tile_points = 0.1, 6000
+    else:
+        V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
+        P, _ = synthetic.scan(V, F, n_points=40000, seed=1)
+        X = synthetic.scan(V, F, n_points=40000, noise=0.1 * synthetic.spacing(P), seed=1)[0]
+        ratio, tile_points = 0.3, 6000
+    path = tmp_path / "in.npy"
+    np.save(path, X)
+    store = tmp_path / "store"
+    s = run(path, tmp_path / "out.npy", ratio=ratio, tile_points=tile_points, store=store)
+    assert s.n_tiles >= 8
+    ts, seqs = _keep_from_store(store, len(X))
+    cut = global_cut(seqs, len(X) - s.target)
+    keep_t = np.zeros(len(X), bool)
+    for i in range(ts.n_tiles):
+        step = ts.read_result(i, "step")
+        keep_t[ts.core(i)[1]] = (step < 0) | (step >= cut[i])
+    keep_u = simplify_points(X, ratio=ratio, options={"boundary_threshold": s.threshold}).keep
+    assert keep_t.sum() == keep_u.sum()
+    band = _seam_band(X, ts, 2 * metrics.spacing(X))
+    density = keep_t[band].mean() / keep_u[band].mean()
+    err_t = metrics.surface_error(X, keep_t)[0]
+    err_u = metrics.surface_error(X, keep_u)[0]
+    print(f"{case}: band density tiled/untiled {density:.3f}, mean error {err_t / err_u:.3f}")
+    assert 0.9 <= density <= 1.1
+    assert err_t <= 1.05 * err_u
+    if case == "fandisk_scan":
+        sp = metrics.spacing(X)
+        edges = synthetic.sample_edges(V, F, sp)
+        cov_t = metrics.edge_coverage(X, keep_t, edges, sp)
+        cov_u = metrics.edge_coverage(X, keep_u, edges, sp)
+        print(f"edge coverage tiled {cov_t:.3f} untiled {cov_u:.3f}")
+        assert cov_t >= 0.95 * cov_u
