@@ -8,6 +8,12 @@ removed repeatedly, with exact local updates, until the requested size is reache
 from .core import SimplifyOptions, SimplifyResult, simplify_points
 from .errors import BudgetWarning, InputError, TiledSimplifyError
 
+
+def run(*args, **kwargs):
+    """The tiled pipeline; see :func:`tiledsimplify.pipeline.run` (imports dask lazily)."""
+    from .pipeline import run as _run
+    return _run(*args, **kwargs)
+
 __version__ = "0.1.0"
 
 __all__ = [
@@ -16,6 +22,7 @@ __all__ = [
     "SimplifyOptions",
     "SimplifyResult",
     "TiledSimplifyError",
+    "run",
     "simplify_points",
     "__version__",
 ]
