@@ -1,0 +1,82 @@
+"""End-to-end speed and memory of ``tiledsimplify run`` on a synthetic LAZ scan.
+
+The scan is made by the project's own line scanner: Fandisk scaled to 1 m, several views,
+noise 0.1 x spacing, quantised to 0.1 mm in a LAS 1.2 point format 0 file. Each run is its own
+process (peak RSS from the OS). Workers 1 and 2 on the local threaded scheduler.
+
+    python benchmarks/pipeline_speed.py 200000 1000000
+"""
+
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+def make_laz(n, path):
+    import laspy
+
+    from tiledsimplify.io import read_mesh
+    from tiledsimplify.synthetic import scan, spacing
+    V, F = read_mesh(DATA / "meshes" / "cad_classic" / "fandisk.obj")
+    V = (V - V.min(0)) / (V.max(0) - V.min(0)).max()
+    P, _ = scan(V, F, n_points=min(n, 200_000), views=6, seed=0)
+    s = spacing(P) * np.sqrt(min(n, 200_000) / n)
+    P, _ = scan(V, F, n_points=n, views=6, noise=0.1 * s, seed=0)
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.scales = np.array([1e-4, 1e-4, 1e-4])
+    header.offsets = np.zeros(3)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = P[:, 0], P[:, 1], P[:, 2]
+    las.intensity = np.arange(len(P)) % 65536
+    las.write(path)
+    return len(P)
+
+
+def one(path, workers, tile_points):
+    from tiledsimplify.pipeline import run
+    out = Path(path).with_name(f"out_{workers}.laz")
+    t = time.perf_counter()
+    s = run(path, out, ratio=0.2, workers=workers, tile_points=tile_points)
+    wall = time.perf_counter() - t
+    return {"n": s.n_input, "workers": workers, "wall": wall, "tiles": s.n_tiles,
+            "seconds": s.seconds, "reached": s.reached, "kept": s.n_output,
+            "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def main(sizes):
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in sizes:
+            path = Path(tmp) / f"scan_{n}.laz"
+            n_real = make_laz(n, path)
+            for w in (1, 2):
+                out = subprocess.run([sys.executable, __file__, "--one", str(path), str(w),
+                                      str(max(50_000, n_real // 8))], check=True,
+                                     capture_output=True, text=True).stdout
+                rows.append(json.loads(out.strip().splitlines()[-1]))
+    print("| points | workers | tiles | wall s | input pts/s | speed-up | ingest s | threshold s "
+          "| tiles s | output s | peak RSS MB |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    base = {}
+    for r in rows:
+        base.setdefault(r["n"], r["wall"])
+        sec = r["seconds"]
+        print(f"| {r['n']:,} | {r['workers']} | {r['tiles']} | {r['wall']:.1f} "
+              f"| {r['n'] / r['wall']:,.0f} | {base[r['n']] / r['wall']:.2f}x "
+              f"| {sec['ingest']:.1f} | {sec['threshold']:.1f} | {sec['tiles']:.1f} "
+              f"| {sec['output']:.1f} | {r['rss_mb']:.0f} |")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 5 and sys.argv[1] == "--one":
+        print(json.dumps(one(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))))
+    else:
+        main([int(a) for a in sys.argv[1:]] or [200_000, 1_000_000])
