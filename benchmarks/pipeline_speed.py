@@ -5,6 +5,7 @@ noise 0.1 x spacing, quantised to 0.1 mm in a LAS 1.2 point format 0 file. Each 
 process (peak RSS from the OS). Workers 1 and 2 on the local threaded scheduler.
 
     python benchmarks/pipeline_speed.py 200000 1000000
+    python benchmarks/pipeline_speed.py --workers 2 10000000     # only the 2-worker run
 """
 
 import json
@@ -51,13 +52,13 @@ def one(path, workers, tile_points):
             "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
-def main(sizes):
+def main(sizes, workers=(1, 2)):
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:
             path = Path(tmp) / f"scan_{n}.laz"
             n_real = make_laz(n, path)
-            for w in (1, 2):
+            for w in workers:
                 out = subprocess.run([sys.executable, __file__, "--one", str(path), str(w),
                                       str(max(50_000, n_real // 8))], check=True,
                                      capture_output=True, text=True).stdout
@@ -79,4 +80,8 @@ if __name__ == "__main__":
     if len(sys.argv) == 5 and sys.argv[1] == "--one":
         print(json.dumps(one(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))))
     else:
-        main([int(a) for a in sys.argv[1:]] or [200_000, 1_000_000])
+        args = sys.argv[1:]
+        workers = (1, 2)
+        if args[:1] == ["--workers"]:
+            workers, args = (int(args[1]),), args[2:]
+        main([int(a) for a in args] or [200_000, 1_000_000], workers)
