@@ -1,16 +1,21 @@
 """One way to read any supported input in chunks: ``open_source(spec)``.
 
 LAS/LAZ files, folders and globs stream through :class:`~tiledsimplify.io.las.LasSource`.
-NPY files are memory-mapped and sliced. Other point formats (PLY, XYZ/CSV, meshes) are read
-whole and served in chunks (they are rarely the huge inputs; LAS/LAZ are).
+NPY files and binary PLY files are memory-mapped and sliced; ASCII PLY and XYZ/CSV/TXT text is
+parsed a chunk of lines at a time. Memory is bounded by the chunk size in all these cases.
+Compressed (``.gz``) point files and meshes (OBJ/OFF/STL) are read whole.
 """
 
+import itertools
 from pathlib import Path
 
 import numpy as np
 
+from ..errors import FileFormatError
 from .las import LasSource, las_files
-from .mesh import read_points
+from .mesh import _PLY_TYPES, _parse_ply_header, read_points
+
+TEXT_SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".asc")
 
 
 class ArraySource:
@@ -36,6 +41,108 @@ class ArraySource:
             yield start, np.ascontiguousarray(self._xyz[start:stop, :3], dtype=np.float64), {}
 
 
+class ColumnsSource(ArraySource):
+    """Chunks from a memory-mapped structured array with fields x, y, z (binary PLY)."""
+
+    def chunks(self):
+        for start in range(0, self.count, self.chunk_points):
+            part = self._xyz[start:start + self.chunk_points]
+            yield start, np.stack([part["x"], part["y"], part["z"]], axis=1).astype(
+                np.float64), {}
+
+
+class TextSource:
+    """Chunks of an ASCII point file (XYZ/CSV/TXT, or the vertex block of an ASCII PLY)."""
+
+    is_las = False
+
+    def __init__(self, path, chunk_points, *, skip_lines, count, delimiter):
+        self.files = [Path(path)]
+        self.chunk_points = int(chunk_points)
+        self._skip = skip_lines
+        self._count = int(count)
+        self._delimiter = delimiter
+
+    @property
+    def count(self):
+        return self._count
+
+    def __len__(self):
+        return self._count
+
+    def chunks(self):
+        path = self.files[0]
+        start = 0
+        with open(path, "r", encoding="ascii", errors="replace") as fh:
+            for _ in range(self._skip):
+                fh.readline()
+            while start < self._count:
+                m = min(self.chunk_points, self._count - start)
+                lines = list(itertools.islice(fh, m))
+                if len(lines) < m:
+                    raise FileFormatError(f"{path}: expected {self._count} points but the file "
+                                          f"ends after {start + len(lines)}; it is truncated.")
+                try:
+                    xyz = np.loadtxt(lines, delimiter=self._delimiter, usecols=(0, 1, 2),
+                                     dtype=np.float64, ndmin=2)
+                except ValueError as exc:
+                    raise FileFormatError(f"{path}: unreadable point line near point {start} "
+                                          f"({exc}); fix or remove it.") from None
+                yield start, xyz, {}
+                start += m
+
+
+def _text_layout(path):
+    """(lines to skip, number of points, delimiter) of an XYZ/CSV/TXT file."""
+    with open(path, "rb") as fh:
+        first = fh.readline()
+        fh.seek(0)
+        n_lines, last = 0, b""
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            n_lines += block.count(b"\n")
+            last = block[-1:]
+    if last not in (b"", b"\n"):
+        n_lines += 1  # a last line without a newline
+    line = first.decode("ascii", errors="replace")
+    delimiter = "," if "," in line else None
+    tokens = line.replace(",", " ").split()
+    try:
+        [float(t) for t in tokens[:3]]
+        header = len(tokens) < 3
+    except ValueError:
+        header = True
+    return int(header), n_lines - int(header), delimiter
+
+
+def _ply_source(path, chunk_points):
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    if b"end_header" not in head:
+        return None
+    fmt, elements, body_start = _parse_ply_header(path, head)
+    if not elements or elements[0].name != "vertex":
+        return None
+    vertex = elements[0]
+    if any(p.is_list for p in vertex.props) or not {"x", "y", "z"} <= {
+            p.name for p in vertex.props}:
+        return None
+    if fmt == "ascii":
+        header_lines = head[:body_start].count(b"\n")
+        names = [p.name for p in vertex.props]
+        if names[:3] != ["x", "y", "z"]:
+            return None
+        return TextSource(path, chunk_points, skip_lines=header_lines, count=vertex.count,
+                          delimiter=None)
+    endian = "<" if fmt == "binary_little_endian" else ">"
+    dtype = np.dtype([(p.name, endian + _PLY_TYPES.get(p.code, p.code)) for p in vertex.props])
+    size = Path(path).stat().st_size
+    if body_start + vertex.count * dtype.itemsize > size:
+        raise FileFormatError(f"{path}: the PLY vertex data is shorter than its header says "
+                              f"({vertex.count} vertices); the file is truncated.")
+    mm = np.memmap(path, dtype=dtype, mode="r", offset=body_start, shape=(vertex.count,))
+    return ColumnsSource(mm, chunk_points, files=[Path(path)])
+
+
 def _is_las_spec(spec):
     if isinstance(spec, (list, tuple)):
         return True
@@ -55,7 +162,15 @@ def open_source(spec, chunk_points=1_000_000):
     p = Path(spec)
     if not p.exists():
         raise FileNotFoundError(2, "No such file", str(p))
-    if p.suffix.lower() == ".npy":
+    suffix = p.suffix.lower()
+    if suffix == ".ply":
+        src = _ply_source(p, chunk_points)
+        if src is not None:
+            return src
+    if suffix in TEXT_SUFFIXES:
+        skip, count, delimiter = _text_layout(p)
+        return TextSource(p, chunk_points, skip_lines=skip, count=count, delimiter=delimiter)
+    if suffix == ".npy":
         arr = np.load(p, mmap_mode="r")
         if arr.dtype.names:  # our own structured output
             arr = np.stack([arr["x"], arr["y"], arr["z"]], axis=1)

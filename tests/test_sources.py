@@ -1,0 +1,71 @@
+"""Chunked input readers equal whole reads (PLY binary/ASCII, XYZ, CSV, NPY)."""
+
+import gzip
+import shutil
+
+import numpy as np
+import pytest
+
+from tiledsimplify.errors import FileFormatError
+from tiledsimplify.io import read_points
+from tiledsimplify.io.points_out import write_points
+from tiledsimplify.io.sources import ArraySource, ColumnsSource, TextSource, open_source
+
+
+def _chunked(path, chunk):
+    src = open_source(path, chunk_points=chunk)
+    parts = list(src.chunks())
+    starts = [s for s, _, _ in parts]
+    xyz = np.concatenate([x for _, x, _ in parts])
+    assert starts == list(range(0, src.count, chunk))
+    assert len(xyz) == src.count
+    return src, xyz
+
+
+@pytest.fixture()
+def cloud():
+    return np.random.default_rng(0).random((1003, 3)) * [100.0, 50.0, 10.0] - 20.0
+
+
+@pytest.mark.parametrize("suffix,kind", [(".ply", ColumnsSource), (".xyz", TextSource),
+                                         (".csv", TextSource), (".npy", ArraySource)])
+def test_chunked_equals_whole(tmp_path, cloud, suffix, kind):
+    path = tmp_path / f"c{suffix}"
+    write_points(path, cloud, {"importance": np.arange(len(cloud), dtype=float)})
+    src, xyz = _chunked(path, 100)
+    assert isinstance(src, kind)
+    np.testing.assert_array_equal(xyz, read_points(path))
+    np.testing.assert_allclose(xyz, cloud, rtol=1e-15)
+
+
+def test_ascii_ply_and_plain_xyz(tmp_path, cloud, data_dir):
+    lines = ["ply", "format ascii 1.0", f"element vertex {len(cloud)}", "property float x",
+             "property float y", "property float z", "property uchar red", "element face 0",
+             "property list uchar int vertex_indices", "end_header"]
+    body = [f"{x:.6f} {y:.6f} {z:.6f} 7" for x, y, z in cloud]
+    path = tmp_path / "a.ply"
+    path.write_text("\n".join(lines + body) + "\n")
+    src, xyz = _chunked(path, 333)
+    assert isinstance(src, TextSource)
+    np.testing.assert_array_equal(xyz, read_points(path))
+    plain = tmp_path / "p.xyz"
+    np.savetxt(plain, cloud)  # no header, no trailing delimiter
+    _, xyz = _chunked(plain, 1000)
+    np.testing.assert_array_equal(xyz, cloud)
+    # a real raw scan (gzipped: read whole, still chunked)
+    raw = data_dir / "scans" / "stanford_bunny_range" / "bun000.ply.gz"
+    _, xyz = _chunked(raw, 10000)
+    assert len(xyz) == 40256
+
+
+def test_truncated_inputs_fail_naming_the_file(tmp_path, cloud):
+    path = tmp_path / "t.ply"
+    write_points(path, cloud)
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) - 100])
+    with pytest.raises(FileFormatError, match="t.ply.*truncated"):
+        open_source(path)
+    bad = tmp_path / "b.xyz"
+    bad.write_text("x y z\n1 2 3\n4 five 6\n")
+    with pytest.raises(FileFormatError, match="b.xyz"):
+        list(open_source(bad).chunks())
