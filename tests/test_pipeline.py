@@ -211,3 +211,41 @@ def test_tiles_do_not_show(case, bunny, data_dir, tmp_path):
         cov_u = metrics.edge_coverage(X, keep_u, edges, sp)
         print(f"edge coverage tiled {cov_t:.3f} untiled {cov_u:.3f}")
         assert cov_t >= 0.95 * cov_u
+
+
+def test_killed_run_resumes_to_the_same_output(bunny, tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from tiledsimplify.tiles import StoreError
+    X, path = bunny
+    args = [str(path), None, "--ratio", "0.2", "--tile-points", "800", "--scheduler",
+            "synchronous", "--no-progress", "-q"]
+    clean = tmp_path / "clean.npy"
+    assert main(["run", *[str(clean) if a is None else a for a in args]]) == EXIT_OK
+    store = tmp_path / "store"
+    out = tmp_path / "resumed.npy"
+    cmd = [sys.executable, "-m", "tiledsimplify", "run",
+           *[str(out) if a is None else a for a in args], "--store", str(store)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.time() + 300
+        while time.time() < deadline and proc.poll() is None:
+            try:
+                if len(TileStore.open(store).done_tiles()) >= 2:
+                    break
+            except (StoreError, FileNotFoundError, ValueError, KeyError):
+                pass
+            time.sleep(0.2)
+        assert proc.poll() is None, "the run finished before it could be killed"
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    ts = TileStore.open(store)
+    assert 0 < len(ts.done_tiles()) < ts.n_tiles and not out.exists()
+    assert subprocess.run(cmd).returncode == EXIT_OK
+    assert out.read_bytes() == clean.read_bytes()
