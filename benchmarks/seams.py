@@ -1,0 +1,91 @@
+"""Do the tiles show? Tiled vs untiled on the same cloud, same threshold, same count.
+
+Kept density in a band two spacings wide around internal tile faces, mean surface error,
+Hausdorff and sharp-edge coverage. Cases: the Bunny (35,947 points, 10 %) and a noisy line
+scan of Fandisk (~200k points, 20 %), each cut into >= 8 tiles.
+
+    python benchmarks/seams.py
+"""
+
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from tiledsimplify import BudgetWarning, metrics, simplify_points, synthetic
+from tiledsimplify.io import read_mesh, read_points
+from tiledsimplify.pipeline import run
+from tiledsimplify.pipeline.budget import global_cut, tile_sequence
+from tiledsimplify.tiles import TileStore
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+def band_of(X, ts, width):
+    tile = ts.plan.assign(X)
+    d = np.full(len(X), np.inf)
+    for i in range(ts.n_tiles):
+        lo, hi = ts.box(i)
+        m = tile == i
+        for ax in range(3):
+            for face in (lo[ax], hi[ax]):
+                if np.isfinite(face) and X[:, ax].min() < face < X[:, ax].max():
+                    d[m] = np.minimum(d[m], np.abs(X[m, ax] - face))
+    return d < width
+
+
+def case(name, X, ratio, tile_points, edges=None):
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "in.npy"
+        np.save(path, X)
+        t = time.perf_counter()
+        s = run(path, Path(tmp) / "out.npy", ratio=ratio, tile_points=tile_points,
+                store=Path(tmp) / "store", workers=2)
+        t_tiled = time.perf_counter() - t
+        ts = TileStore.open(Path(tmp) / "store")
+        seqs = {i: tile_sequence(ts.read_result(i, "step"), ts.read_result(i, "importance"))
+                for i in range(ts.n_tiles)}
+        cut = global_cut(seqs, len(X) - s.target)
+        keep_t = np.zeros(len(X), bool)
+        for i in range(ts.n_tiles):
+            step = ts.read_result(i, "step")
+            keep_t[ts.core(i)[1]] = (step < 0) | (step >= cut[i])
+        t = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", BudgetWarning)
+            keep_u = simplify_points(X, ratio=ratio,
+                                     options={"boundary_threshold": s.threshold}).keep
+        t_untiled = time.perf_counter() - t
+        sp = metrics.spacing(X)
+        band = band_of(X, ts, 2 * sp)
+        rows = []
+        for label, k, secs in (("untiled", keep_u, t_untiled), ("tiled", keep_t, t_tiled)):
+            err = metrics.surface_error(X, k)[0]
+            hd = metrics.hausdorff_distance(X, k)
+            cov = metrics.edge_coverage(X, k, edges, sp) if edges is not None else float("nan")
+            rows.append((label, int(k.sum()), k[band].mean(), err, hd, cov, secs))
+        u = rows[0]
+        for label, kept, dens, err, hd, cov, secs in rows:
+            print(f"| {name} | {label} ({ts.n_tiles} tiles) | {kept:,} | {dens / u[2]:.3f} "
+                  f"| {1e4 * err:.1f} ({err / u[3]:.3f}) | {1e4 * hd:.0f} "
+                  f"| {cov:.3f} | {secs:.0f} |")
+
+
+def main():
+    print("| cloud | run | kept | band density / untiled | mean err (ratio) | Hausdorff "
+          "| edge cov. | s |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|")
+    X = read_points(DATA / "meshes" / "stanford_bunny" / "bun_zipper.ply.gz")
+    case("Bunny 35,947, 10 %", X, 0.1, 6000)
+    V, F = read_mesh(DATA / "meshes" / "cad_classic" / "fandisk.obj")
+    P, _ = synthetic.scan(V, F, n_points=200_000, seed=2)
+    sp = synthetic.spacing(P)
+    X = synthetic.scan(V, F, n_points=200_000, noise=0.1 * sp, seed=2)[0]
+    case(f"Fandisk scan {len(X):,}, 20 %", X, 0.2, 25_000,
+         edges=synthetic.sample_edges(V, F, metrics.spacing(X)))
+
+
+if __name__ == "__main__":
+    main()
