@@ -5,7 +5,7 @@ noise 0.1 x spacing, quantised to 0.1 mm in a LAS 1.2 point format 0 file. Each 
 process (peak RSS from the OS). Workers 1 and 2 on the local threaded scheduler.
 
     python benchmarks/pipeline_speed.py 200000 1000000
-    python benchmarks/pipeline_speed.py --workers 2 10000000     # only the 2-worker run
+    python benchmarks/pipeline_speed.py --workers 2 --tile-points 150000 10000000
 """
 
 import json
@@ -52,7 +52,7 @@ def one(path, workers, tile_points):
             "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
-def main(sizes, workers=(1, 2)):
+def main(sizes, workers=(1, 2), tile_points=None):
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:
@@ -60,7 +60,8 @@ def main(sizes, workers=(1, 2)):
             n_real = make_laz(n, path)
             for w in workers:
                 out = subprocess.run([sys.executable, __file__, "--one", str(path), str(w),
-                                      str(max(50_000, n_real // 8))], check=True,
+                                      str(tile_points or max(50_000, n_real // 8))],
+                                     check=True,
                                      capture_output=True, text=True).stdout
                 rows.append(json.loads(out.strip().splitlines()[-1]))
     print("| points | workers | tiles | wall s | input pts/s | speed-up | ingest s | threshold s "
@@ -81,7 +82,11 @@ if __name__ == "__main__":
         print(json.dumps(one(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))))
     else:
         args = sys.argv[1:]
-        workers = (1, 2)
-        if args[:1] == ["--workers"]:
-            workers, args = (int(args[1]),), args[2:]
-        main([int(a) for a in args] or [200_000, 1_000_000], workers)
+        workers, tile_points = (1, 2), None
+        while args[:1] in (["--workers"], ["--tile-points"]):
+            if args[0] == "--workers":
+                workers = (int(args[1]),)
+            else:
+                tile_points = int(args[1])
+            args = args[2:]
+        main([int(a) for a in args] or [200_000, 1_000_000], workers, tile_points)
