@@ -82,3 +82,28 @@ def test_cli_exit_codes(cloud, tmp_path, caplog):
     assert not (tmp_path / "missing.ply").exists()
     with pytest.raises(SystemExit):
         main(["simplify", str(path), str(out)])  # neither --ratio nor --count
+
+
+def test_cli_evaluate(cloud, tmp_path, capsys, data_dir):
+    import json
+    X, path = cloud
+    out = tmp_path / "k.xyz"
+    assert main(["simplify", str(path), str(out), "--ratio", "0.3", "-q"]) == EXIT_OK
+    capsys.readouterr()
+    assert main(["evaluate", str(path), str(out), "--json"]) == EXIT_OK
+    got = json.loads(capsys.readouterr().out)
+    from tiledsimplify import metrics
+    ref = metrics.evaluate(X, read_points(out))
+    assert got["n_kept"] == 360 and got["hausdorff"] == pytest.approx(ref["hausdorff"])
+    # with a mesh: sharp-edge coverage; the original itself covers its edges fully
+    mesh = data_dir / "meshes" / "trimesh_cad" / "angle_block.STL"
+    from tiledsimplify import synthetic
+    from tiledsimplify.io import read_mesh
+    V, F = read_mesh(mesh)
+    P, _ = synthetic.sample_surface_even(V, F, 3000, seed=0)
+    pts = tmp_path / "block.npy"
+    np.save(pts, P)
+    assert main(["evaluate", str(pts), str(pts), "--mesh", str(mesh), "--json"]) == EXIT_OK
+    got = json.loads(capsys.readouterr().out)
+    assert got["edge_coverage"] > 0.95 and got["hausdorff"] == 0.0
+    assert main(["evaluate", str(pts), str(tmp_path / "nope.xyz")]) == EXIT_INPUT
