@@ -17,23 +17,10 @@ import numpy as np
 from tiledsimplify import BudgetWarning, metrics, simplify_points, synthetic
 from tiledsimplify.io import read_mesh, read_points
 from tiledsimplify.pipeline import run
-from tiledsimplify.pipeline.budget import global_cut, tile_sequence
+from tiledsimplify.pipeline.budget import kept_mask, store_cut
 from tiledsimplify.tiles import TileStore
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-
-
-def band_of(X, ts, width):
-    tile = ts.plan.assign(X)
-    d = np.full(len(X), np.inf)
-    for i in range(ts.n_tiles):
-        lo, hi = ts.box(i)
-        m = tile == i
-        for ax in range(3):
-            for face in (lo[ax], hi[ax]):
-                if np.isfinite(face) and X[:, ax].min() < face < X[:, ax].max():
-                    d[m] = np.minimum(d[m], np.abs(X[m, ax] - face))
-    return d < width
 
 
 def case(name, X, ratio, tile_points, edges=None):
@@ -45,13 +32,7 @@ def case(name, X, ratio, tile_points, edges=None):
                 store=Path(tmp) / "store", workers=2)
         t_tiled = time.perf_counter() - t
         ts = TileStore.open(Path(tmp) / "store")
-        seqs = {i: tile_sequence(ts.read_result(i, "step"), ts.read_result(i, "importance"))
-                for i in range(ts.n_tiles)}
-        cut = global_cut(seqs, len(X) - s.target)
-        keep_t = np.zeros(len(X), bool)
-        for i in range(ts.n_tiles):
-            step = ts.read_result(i, "step")
-            keep_t[ts.core(i)[1]] = (step < 0) | (step >= cut[i])
+        keep_t = kept_mask(ts, store_cut(ts, len(X) - s.target))
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BudgetWarning)
@@ -59,7 +40,7 @@ def case(name, X, ratio, tile_points, edges=None):
                                      options={"boundary_threshold": s.threshold}).keep
         t_untiled = time.perf_counter() - t
         sp = metrics.spacing(X)
-        band = band_of(X, ts, 2 * sp)
+        band = ts.plan.face_distance(X) < 2 * sp
         rows = []
         for label, k, secs in (("untiled", keep_u, t_untiled), ("tiled", keep_t, t_tiled)):
             err = metrics.surface_error(X, k)[0]

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 from tiledsimplify import metrics as M
 from tiledsimplify.errors import InputError

@@ -1,8 +1,6 @@
 """The tiled pipeline: exact global count, agreement with the untiled core, the same output for
 every scheduler, resume, LAS/LAZ end to end, and the command line."""
 
-import shutil
-
 import laspy
 import numpy as np
 import pytest
@@ -11,7 +9,7 @@ from tiledsimplify import simplify_points
 from tiledsimplify.cli import EXIT_OK, main
 from tiledsimplify.io import read_points
 from tiledsimplify.pipeline import run
-from tiledsimplify.pipeline.budget import global_cut, tile_sequence
+from tiledsimplify.pipeline.budget import global_cut, kept_mask, store_cut
 from tiledsimplify.pipeline.tile_task import BINS, threshold_from_histogram
 from tiledsimplify.tiles import TileStore
 
@@ -22,13 +20,6 @@ def bunny(data_dir, tmp_path_factory):
     path = tmp_path_factory.mktemp("in") / "bunny.npy"
     np.save(path, X)
     return X, path
-
-
-def _keep_from_store(store, n):
-    ts = TileStore.open(store)
-    seqs = {i: tile_sequence(ts.read_result(i, "step"), ts.read_result(i, "importance"))
-            for i in range(ts.n_tiles)}
-    return ts, seqs
 
 
 def test_global_cut_is_exact_and_prefers_flat_tiles():
@@ -62,9 +53,13 @@ def test_tiled_run_exact_count_and_agrees_with_untiled(bunny, tmp_path):
     kept = np.stack([t["x"], t["y"], t["z"]], 1)
     idx = np.flatnonzero((X[:, None, :] == kept[None, :, :]).all(-1).any(1))
     assert len(idx) == len(kept)
+    np.testing.assert_array_equal(X[idx], kept)
+    # and they are the ones the global cut keeps
+    ts = TileStore.open(store)
+    np.testing.assert_array_equal(np.flatnonzero(kept_mask(ts, store_cut(ts, len(X) - s.target))),
+                                  idx)
     # boundary flags and normals of core points, with the same threshold, equal the untiled
     # run wherever the halo covers the neighbourhoods (all but a few points)
-    ts, _ = _keep_from_store(store, len(X))
     untiled = simplify_points(X, ratio=0.2, options={"boundary_threshold": s.threshold})
     agree = n = 0
     for i in range(ts.n_tiles):
@@ -158,20 +153,6 @@ def test_cli_run_with_config(bunny, tmp_path):
     assert main(["run", str(path), str(out), "--config", str(bad), "-q"]) == 2
 
 
-def _seam_band(X, ts, width):
-    """Points within ``width`` of an internal face of their tile's box."""
-    tile = ts.plan.assign(X)
-    d = np.full(len(X), np.inf)
-    for i in range(ts.n_tiles):
-        lo, hi = ts.box(i)
-        m = tile == i
-        for ax in range(3):
-            for face in (lo[ax], hi[ax]):
-                if np.isfinite(face) and X[:, ax].min() < face < X[:, ax].max():
-                    d[m] = np.minimum(d[m], np.abs(X[m, ax] - face))
-    return d < width
-
-
 @pytest.mark.parametrize("case", ["bunny", "fandisk_scan"])
 def test_tiles_do_not_show(case, bunny, data_dir, tmp_path):
     from tiledsimplify import metrics, synthetic
@@ -189,15 +170,11 @@ def test_tiles_do_not_show(case, bunny, data_dir, tmp_path):
     store = tmp_path / "store"
     s = run(path, tmp_path / "out.npy", ratio=ratio, tile_points=tile_points, store=store)
     assert s.n_tiles >= 8
-    ts, seqs = _keep_from_store(store, len(X))
-    cut = global_cut(seqs, len(X) - s.target)
-    keep_t = np.zeros(len(X), bool)
-    for i in range(ts.n_tiles):
-        step = ts.read_result(i, "step")
-        keep_t[ts.core(i)[1]] = (step < 0) | (step >= cut[i])
+    ts = TileStore.open(store)
+    keep_t = kept_mask(ts, store_cut(ts, len(X) - s.target))
     keep_u = simplify_points(X, ratio=ratio, options={"boundary_threshold": s.threshold}).keep
     assert keep_t.sum() == keep_u.sum()
-    band = _seam_band(X, ts, 2 * metrics.spacing(X))
+    band = ts.plan.face_distance(X) < 2 * metrics.spacing(X)
     density = keep_t[band].mean() / keep_u[band].mean()
     err_t = metrics.surface_error(X, keep_t)[0]
     err_u = metrics.surface_error(X, keep_u)[0]

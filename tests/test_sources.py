@@ -1,7 +1,5 @@
 """Chunked input readers equal whole reads (PLY binary/ASCII, XYZ, CSV, NPY)."""
 
-import gzip
-import shutil
 
 import numpy as np
 import pytest

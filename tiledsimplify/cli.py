@@ -112,8 +112,6 @@ def _load_config(path):
     try:
         with open(path, "rb") as fh:
             cfg = tomllib.load(fh)
-    except FileNotFoundError:
-        raise
     except tomllib.TOMLDecodeError as exc:
         raise TiledSimplifyError(f"{path}: not valid TOML ({exc}); fix the file.") from None
     unknown = sorted(set(cfg) - {"run", "simplify"})

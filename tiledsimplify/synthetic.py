@@ -563,7 +563,7 @@ def scan(
         u, w = _frame(d)
         shift = shifts[vi]
 
-        def grid(n_lines):
+        def grid(n_lines, shift=shift):
             n_lines = max(int(n_lines), 2)
             n_samp = max(int(round(line_spacing_ratio * n_lines)), 2)
             step_l = 2 * half / n_lines

@@ -11,7 +11,7 @@ Sutherland & Hodgman, "Reentrant polygon clipping", CACM 17(1), 1974, specialise
 polygons and one half-plane at a time.
 """
 
-from ._jit import jit, jit_inline
+from ._jit import jit_inline
 
 
 @jit_inline

@@ -7,8 +7,6 @@ microseconds in allocation alone; these run allocation-free inside numba kernels
 
 import math
 
-import numpy as np
-
 from ._jit import jit, jit_inline
 
 
@@ -226,9 +224,3 @@ def covariance_about(X, p, idx, k):
     mx, my, mz = sx / cnt, sy / cnt, sz / cnt
     return (sxx / cnt - mx * mx, sxy / cnt - mx * my, sxz / cnt - mx * mz,
             syy / cnt - my * my, syz / cnt - my * mz, szz / cnt - mz * mz)
-
-
-def smallest_axis_numpy(cov):
-    """Reference (numpy) twin of :func:`smallest_axis` for tests: eigh per matrix."""
-    w, v = np.linalg.eigh(cov)
-    return w, v[..., :, 0]

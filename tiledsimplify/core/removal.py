@@ -105,14 +105,12 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     nvec = np.empty(3)
     wvec = np.empty(3)
     step = 0
-    vetoed = 0
     while step < n_steps and size > 0:
         p = heap.pop(hp, pos, importance, tie, size)
         size -= 1
         removable[p] = False
         if not guard_allows(guard, guard_value, X, p, start, cnt, pool):
-            vetoed += 1  # kept for good: removals only make the neighbourhood sparser
-            continue
+            continue  # kept for good: removals only make the neighbourhood sparser
         order[step] = p
         at[step] = importance[p]
         # -- 1. Voronoi neighbourhoods

@@ -60,7 +60,7 @@ def _write_text(fh, table, sep):
     cols = [table[n].astype(np.int64) if table.dtype[n].kind in "bi" else table[n]
             for n in names]
     fmt = sep.join("%d" if c.dtype.kind == "i" else "%.17g" for c in cols)
-    np.savetxt(fh, np.column_stack(cols) if cols else np.empty((0, 0)), fmt=fmt)
+    np.savetxt(fh, np.column_stack(cols), fmt=fmt)
 
 
 def write_points(path, xyz, columns=None):

@@ -43,3 +43,24 @@ def global_cut(sequences, n_remove):
     take = np.lexsort((step_of, tile_of, level))[:n_remove]
     counts = np.bincount(tile_of[take], minlength=len(tiles))
     return {t: int(counts[i]) for i, t in enumerate(tiles)}
+
+
+def store_cut(store, n_remove):
+    """:func:`global_cut` over the finished tiles of a :class:`~tiledsimplify.tiles.TileStore`."""
+    seqs = {i: tile_sequence(store.read_result(i, "step"), store.read_result(i, "importance"))
+            for i in range(store.n_tiles)}
+    return global_cut(seqs, n_remove)
+
+
+def kept_in_tile(store, tile, cut):
+    """Bool mask over a tile's core points: kept after the first ``cut[tile]`` removals."""
+    step = store.read_result(tile, "step")
+    return (step < 0) | (step >= cut[tile])
+
+
+def kept_mask(store, cut):
+    """Bool mask over the whole input (by original index) of the points kept after ``cut``."""
+    keep = np.zeros(store.n_total, dtype=bool)
+    for i in range(store.n_tiles):
+        keep[store.core(i)[1]] = kept_in_tile(store, i, cut)
+    return keep

@@ -10,7 +10,6 @@ finished tiles are not recomputed, and the output is rewritten from the stored r
 import hashlib
 import json
 import logging
-import os
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
@@ -26,7 +25,7 @@ from ..errors import InputError
 from ..io.points_out import write_points
 from ..io.sources import open_source
 from ..tiles import TileStore
-from .budget import global_cut, tile_sequence
+from .budget import kept_in_tile, store_cut
 from .tile_task import deviation_histogram, simplify_tile, threshold_from_histogram
 
 log = logging.getLogger("tiledsimplify")
@@ -197,10 +196,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
 
         # one global budget, then the output
         t = time.perf_counter()
-        ts = TileStore.open(store_path)
-        seqs = {i: tile_sequence(ts.read_result(i, "step"), ts.read_result(i, "importance"))
-                for i in range(ts.n_tiles)}
-        prefix = global_cut(seqs, n - target)
+        prefix = store_cut(ts, n - target)
         n_removed = sum(prefix.values())
         seconds["budget"] = time.perf_counter() - t
         t = time.perf_counter()
@@ -227,9 +223,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
 
 
 def _kept(ts, tile, prefix):
-    step = ts.read_result(tile, "step")
-    keep = (step < 0) | (step >= prefix[tile])
-    return keep, ts.read_result(tile, "boundary")
+    return kept_in_tile(ts, tile, prefix), ts.read_result(tile, "boundary")
 
 
 def _write_output(ts, source, output, prefix):

@@ -148,6 +148,18 @@ class TilePlan:
         return t
 
     # ------------------------------------------------------------------ assignment
+    def face_distance(self, xyz) -> np.ndarray:
+        """Distance from each point to the nearest internal face of its own tile's box.
+
+        Outer faces (at infinity) do not count; a single-tile plan gives ``inf`` everywhere.
+        Used to measure seams: the points in a band around tile borders.
+        """
+        xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+        faces = np.concatenate([self.lo, self.hi], axis=1)[self.assign(xyz)]
+        d = np.abs(np.concatenate([xyz, xyz], axis=1) - faces)
+        d[~np.isfinite(faces)] = np.inf
+        return d.min(axis=1) if len(d) else np.empty(0)
+
     def assign(self, xyz) -> np.ndarray:
         """Return the tile id of each point.
 
