@@ -37,7 +37,8 @@ def case(name, X, ratio, tile_points, edges=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BudgetWarning)
             keep_u = simplify_points(X, ratio=ratio,
-                                     options={"boundary_threshold": s.threshold}).keep
+                                     options={"boundary_threshold": s.threshold,
+                                              "spacing": s.spacing}).keep
         t_untiled = time.perf_counter() - t
         sp = metrics.spacing(X)
         band = ts.plan.face_distance(X) < 2 * sp

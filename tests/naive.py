@@ -160,3 +160,11 @@ def importance(X, normals, boundary, p, dn):
     """Eq. (1), literally."""
     terms = [abs((X[p] - X[q]) @ normals[q]) for q in dn if not boundary[q]]
     return float(np.mean(terms)) if terms else np.inf
+
+
+def coverage_importance(X, normals, boundary, p, dn, weight):
+    """Eq. (1) (0 if every neighbour is a boundary point) + weight * mean squared distance."""
+    e = importance(X, normals, boundary, p, dn)
+    e = 0.0 if e == np.inf else e
+    rho2 = float(np.mean(np.sum((X[dn] - X[p]) ** 2, axis=1))) if dn else 0.0
+    return e + weight * rho2

@@ -77,7 +77,7 @@ def test_cli_exit_codes(cloud, tmp_path, caplog):
     assert "bad.xyz" in caplog.text
     # every point flagged as boundary: the count cannot be reached, the file is still written
     assert main(["simplify", str(path), str(out), "--ratio", "0.1",
-                 "--boundary-threshold", "0"]) == EXIT_BUDGET
+                 "--boundary-threshold", "0", "--mode", "paper"]) == EXIT_BUDGET
     assert len(read_points(out)) > 120
     assert not (tmp_path / "missing.ply").exists()
     with pytest.raises(SystemExit):

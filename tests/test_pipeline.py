@@ -7,6 +7,7 @@ import pytest
 
 from tiledsimplify import simplify_points
 from tiledsimplify.cli import EXIT_OK, main
+from tiledsimplify.core import edge_fit
 from tiledsimplify.io import read_points
 from tiledsimplify.pipeline import run
 from tiledsimplify.pipeline.budget import global_cut, kept_mask, store_cut
@@ -60,7 +61,8 @@ def test_tiled_run_exact_count_and_agrees_with_untiled(bunny, tmp_path):
                                   idx)
     # boundary flags and normals of core points, with the same threshold, equal the untiled
     # run wherever the halo covers the neighbourhoods (all but a few points)
-    untiled = simplify_points(X, ratio=0.2, options={"boundary_threshold": s.threshold})
+    untiled = simplify_points(X, ratio=0.2, options={"boundary_threshold": s.threshold,
+                                                     "spacing": s.spacing})
     agree = n = 0
     for i in range(ts.n_tiles):
         _, gi = ts.core(i)
@@ -71,8 +73,16 @@ def test_tiled_run_exact_count_and_agrees_with_untiled(bunny, tmp_path):
         cos = np.abs(np.sum(nrm * untiled.normals[gi], axis=1))
         assert np.median(cos) > 0.9999
     assert agree / n > 0.99
-    # the untiled automatic threshold is what the tiles shared
-    assert s.threshold == pytest.approx(simplify_points(X, ratio=1.0).threshold, rel=0.01)
+    assert s.threshold == edge_fit.CANDIDATE
+
+
+def test_paper_mode_tiles_share_the_untiled_automatic_threshold(bunny, tmp_path):
+    X, path = bunny
+    s = run(path, tmp_path / "out.npy", ratio=0.2, tile_points=1200,
+            options={"mode": "paper"})
+    assert s.n_tiles >= 8 and s.reached
+    untiled = simplify_points(X, ratio=1.0, options={"mode": "paper"})
+    assert s.threshold == pytest.approx(untiled.threshold, rel=0.01)
 
 
 @pytest.fixture(scope="module")
@@ -172,7 +182,8 @@ def test_tiles_do_not_show(case, bunny, data_dir, tmp_path):
     assert s.n_tiles >= 8
     ts = TileStore.open(store)
     keep_t = kept_mask(ts, store_cut(ts, len(X) - s.target))
-    keep_u = simplify_points(X, ratio=ratio, options={"boundary_threshold": s.threshold}).keep
+    keep_u = simplify_points(X, ratio=ratio, options={"boundary_threshold": s.threshold,
+                                                      "spacing": s.spacing}).keep
     assert keep_t.sum() == keep_u.sum()
     band = ts.plan.face_distance(X) < 2 * metrics.spacing(X)
     density = keep_t[band].mean() / keep_u[band].mean()

@@ -33,29 +33,36 @@ def _cloud(kind, n, seed=0):
     return X - X.mean(0)
 
 
-def _state(X):
+#: (importance code, weight): the paper's Eq. (1), and Eq. (1) + w rho^2 with a weight that
+#: makes both terms matter on these clouds (unit spacing ~0.5)
+MEASURES = [(0, 0.0), (1, 0.3)]
+
+
+def _state(X, code=0, weight=0.0):
     D = scale_of(X)
     st = neighbourhoods(X, D)
     dev = np.zeros(len(X))
     boundary.all_deviations(X, st.normals, st.dn, st.dn_cnt, dev)
     flags, _ = boundary.detect(dev)
     imp = np.zeros(len(X))
-    importance.all_importance(0, X, st.normals, flags, st.dn, st.dn_cnt, imp)
+    importance.all_importance(code, X, st.normals, flags, st.dn, st.dn_cnt, weight, imp)
     return D, st, flags, imp
 
 
+@pytest.mark.parametrize("measure", MEASURES)
 @pytest.mark.parametrize("kind", ["wavy", "box", "quantised"])
-def test_maintained_state_equals_recomputation(kind):
+def test_maintained_state_equals_recomputation(kind, measure):
+    code, weight = measure
     X = _cloud(kind, 1500)
-    D, st, flags, imp = _state(X)
+    D, st, flags, imp = _state(X, code, weight)
     frozen = np.zeros(len(X), bool)
     frozen[::17] = True
     removable = ~flags & ~frozen
     steps = int(removable.sum()) * 3 // 4
     order, at, st.pool = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), 0, 0, 0.0, steps,
-        BOX_FACTOR * D, TOL_FACTOR * D)
+        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), code, weight, 0, 0.0,
+        steps, BOX_FACTOR * D, TOL_FACTOR * D)
     assert len(order) == steps == len(set(order.tolist()))
     assert not (flags[order] | frozen[order]).any()
     alive = np.ones(len(X), bool)
@@ -65,8 +72,8 @@ def test_maintained_state_equals_recomputation(kind):
     vn_m = adjacency.to_sets(st.start, st.cnt, st.pool)
     vn_f = adjacency.to_sets(fresh.start, fresh.cnt, fresh.pool)
     imp_f = np.zeros(len(keep))
-    importance.all_importance(0, X[keep], fresh.normals, flags[keep], fresh.dn, fresh.dn_cnt,
-                              imp_f)
+    importance.all_importance(code, X[keep], fresh.normals, flags[keep], fresh.dn, fresh.dn_cnt,
+                              weight, imp_f)
     for i, p in enumerate(keep):
         assert vn_m[p] == {int(keep[j]) for j in vn_f[i]}, p
         dn_m = st.dn[p, : st.dn_cnt[p]].tolist()
@@ -77,7 +84,7 @@ def test_maintained_state_equals_recomputation(kind):
             assert imp[p] == imp_f[i], p
 
 
-def _naive_greedy(X, flags, frozen, steps, D):
+def _naive_greedy(X, flags, frozen, steps, D, code, weight):
     """Recompute everything from scratch before every removal."""
     tie = heap.coordinate_hash(X)
     alive = np.ones(len(X), bool)
@@ -86,7 +93,8 @@ def _naive_greedy(X, flags, frozen, steps, D):
         keep = np.flatnonzero(alive)
         st = neighbourhoods(X[keep], D)
         imp = np.zeros(len(keep))
-        importance.all_importance(0, X[keep], st.normals, flags[keep], st.dn, st.dn_cnt, imp)
+        importance.all_importance(code, X[keep], st.normals, flags[keep], st.dn, st.dn_cnt, weight,
+                                  imp)
         cand = [(imp[i], tie[keep[i]], int(keep[i])) for i in range(len(keep))
                 if not flags[keep[i]] and not frozen[keep[i]]]
         if not cand:
@@ -98,18 +106,20 @@ def _naive_greedy(X, flags, frozen, steps, D):
     return order, at
 
 
+@pytest.mark.parametrize("measure", MEASURES)
 @pytest.mark.parametrize("kind", ["wavy", "box"])
-def test_greedy_order_equals_naive_from_scratch(kind):
+def test_greedy_order_equals_naive_from_scratch(kind, measure):
+    code, weight = measure
     X = _cloud(kind, 160, seed=1)
-    D, st, flags, imp = _state(X)
+    D, st, flags, imp = _state(X, code, weight)
     frozen = np.zeros(len(X), bool)
     frozen[:10] = True
     removable = ~flags & ~frozen
     steps = int(removable.sum()) - 5
     order, at, _ = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), 0, 0, 0.0, steps,
-        BOX_FACTOR * D, TOL_FACTOR * D)
-    ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D)
+        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), code, weight, 0, 0.0,
+        steps, BOX_FACTOR * D, TOL_FACTOR * D)
+    ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D, code, weight)
     assert order.tolist() == ref_order
     np.testing.assert_array_equal(at, ref_at)

@@ -69,11 +69,20 @@ def test_deviation_and_importance_match_naive(wavy):
     flags = np.zeros(len(X), bool)
     flags[::5] = True
     imp = np.zeros(len(X))
-    importance.all_importance(0, X, st.normals, flags, st.dn, st.dn_cnt, imp)
+    importance.all_importance(0, X, st.normals, flags, st.dn, st.dn_cnt, 0.0, imp)
     for p in range(0, len(X), 13):
         dn = st.dn[p, : st.dn_cnt[p]].tolist()
         assert dev[p] == pytest.approx(naive.deviation(X, st.normals, p, dn), abs=1e-9)
         assert imp[p] == pytest.approx(naive.importance(X, st.normals, flags, p, dn), rel=1e-9)
+    # the coverage measure (beyond the paper): Eq. (1) + w * mean squared neighbour distance
+    flags[:] = False
+    flags[st.dn[7, : st.dn_cnt[7]]] = True  # point 7: every neighbour a boundary point
+    importance.all_importance(1, X, st.normals, flags, st.dn, st.dn_cnt, 2.5, imp)
+    for p in [7, *range(0, len(X), 13)]:
+        dn = st.dn[p, : st.dn_cnt[p]].tolist()
+        ref = naive.coverage_importance(X, st.normals, flags, p, dn, 2.5)
+        assert imp[p] == pytest.approx(ref, rel=1e-9)
+    assert np.isfinite(imp[7]) and imp[7] > 0
 
 
 def test_boundary_flags_the_ridge_and_only_near_it():

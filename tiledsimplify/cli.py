@@ -15,6 +15,7 @@ import numpy as np
 
 from . import __version__
 from .core import SimplifyOptions, simplify_points
+from .core.options import MODES
 from .errors import BudgetWarning, TiledSimplifyError
 from .io import read_points
 from .io.points_out import write_points
@@ -45,6 +46,9 @@ def _parser():
     s.add_argument("--boundary-threshold", type=float, default=None,
                    help="fixed threshold on the normal-deviation measure (default: automatic)")
     s.add_argument("--no-boundary", action="store_true", help="do not flag sharp-edge points")
+    s.add_argument("--mode", choices=MODES, default=MODES[0],
+                   help="coverage (default): thin edge flags, no emptied faces; paper: the "
+                        "published rule")
     s.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
 
     r = sub.add_parser(
@@ -69,6 +73,8 @@ def _parser():
     r.add_argument("--tile-points", type=int, default=None, help="points per tile (500000)")
     r.add_argument("--halo", type=float, default=None,
                    help="halo width in model units (default: 10 x estimated spacing)")
+    r.add_argument("--mode", choices=MODES, default=None,
+                   help="coverage (default) or paper; overrides [simplify] mode")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
 
@@ -136,6 +142,8 @@ def _run(args):
     if "ratio" in run_cfg and "count" in run_cfg and (args.ratio is not None
                                                       or args.count is not None):
         run_cfg.pop("count" if args.ratio is not None else "ratio")
+    if args.mode is not None:
+        simplify_cfg = {**simplify_cfg, "mode": args.mode}
     summary = run(args.input, args.output, ratio=run_cfg.get("ratio"),
                   count=run_cfg.get("count"), options=SimplifyOptions.from_mapping(simplify_cfg),
                   scheduler=run_cfg.get("scheduler", "threads"), workers=run_cfg.get("workers"),
@@ -148,7 +156,7 @@ def _simplify(args):
     t0 = time.perf_counter()
     xyz = read_points(args.input)
     log.info("read %d points from %s in %.2f s", len(xyz), args.input, time.perf_counter() - t0)
-    options = SimplifyOptions(boundary_threshold=args.boundary_threshold,
+    options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
                               detect_boundary=not args.no_boundary)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", BudgetWarning)

@@ -6,6 +6,20 @@ Boundary neighbours are ignored "as their associated normal vectors are not reli
 A point whose neighbours are all boundary points has no defined importance; it gets ``+inf``
 and so is removed only after every point that has one.
 
+Beyond the paper, ``"coverage"`` adds the hole a removal would open:
+``i(p) = Eq.(1) + w · ρ(p)²`` with ``ρ(p)²`` the mean squared distance from ``p`` to its local-mesh
+neighbours (boundary ones included). On a plane Eq. (1) is ~0 for every point, so the paper's
+greedy empties flat faces; the ``ρ²`` term makes it thin them evenly instead (dense spots go
+first, as in Poisson-disk sample elimination), and a point whose neighbours are already far
+apart is expensive to remove. ``w`` has units of 1/length: a sphere of curvature ``κ`` gives
+Eq. (1) ≈ κρ²/2, so ``w`` is about the curvature below which a region counts as flat; the core
+sets it from the point spacing (:func:`coverage_weight`). Both terms depend only on ``DN_p``
+and the normals of ``DN_p``, so the exact two-ring updates of the removal loop stay exact. A
+point whose neighbours are all boundary points has no Eq. (1) term here (0) rather than
+``+inf``. (Measured alternative, not kept: ``h = reach + nearest distance``, a running bound on
+the Hausdorff radius each point covers, inherited by the nearest neighbour on removal — worse
+Hausdorff on Fandisk at 20 %, 210 vs 188 × 1e-4 of the diagonal.)
+
 Measures are selected by name and dispatched by a small integer inside the removal kernel, so
 new measures plug in without touching the loop.
 """
@@ -15,7 +29,20 @@ import math
 from ._jit import jit
 
 #: name -> code of the importance measures the removal kernel knows
-MEASURES = {"paper": 0}
+MEASURES = {"paper": 0, "coverage": 1}
+
+
+#: the coverage measure's length scale, in point spacings (about the spacing of a 10 % subset)
+LENGTH_SPACINGS = 3.0
+
+
+def coverage_weight(spacing, strength):
+    """``w`` of the coverage measure: ``strength / (LENGTH_SPACINGS · spacing)`` (1/length).
+
+    It depends on the input's spacing only, not on the target, so one progressive order serves
+    every count (:meth:`SimplifyResult.keep_at`, the tiled global cut).
+    """
+    return float(strength) / (LENGTH_SPACINGS * float(spacing))
 
 
 @jit
@@ -38,14 +65,34 @@ def eq1(X, normals, boundary, p, dn, c):
 
 
 @jit
-def importance_of(code, X, normals, boundary, p, dn, c):
-    """Dispatch to the measure with the given code (see :data:`MEASURES`)."""
-    # code 0: the paper's Eq. (1); later measures add branches here
+def spread2(X, p, dn, c):
+    """``ρ(p)²``: mean squared distance from ``p`` to ``dn[:c]`` (0 if ``c == 0``)."""
+    if c == 0:
+        return 0.0
+    total = 0.0
+    for j in range(c):
+        q = dn[j]
+        dx, dy, dz = X[q, 0] - X[p, 0], X[q, 1] - X[p, 1], X[q, 2] - X[p, 2]
+        total += dx * dx + dy * dy + dz * dz
+    return total / c
+
+
+@jit
+def importance_of(code, X, normals, boundary, p, dn, c, weight):
+    """Dispatch to the measure with the given code (see :data:`MEASURES`).
+
+    ``weight`` is the coverage measure's ``w`` (ignored by the paper's measure).
+    """
+    if code == 1:
+        e = eq1(X, normals, boundary, p, dn, c)
+        if e == math.inf:
+            e = 0.0
+        return e + weight * spread2(X, p, dn, c)
     return eq1(X, normals, boundary, p, dn, c)
 
 
 @jit
-def all_importance(code, X, normals, boundary, dn, dn_cnt, out):
+def all_importance(code, X, normals, boundary, dn, dn_cnt, weight, out):
     """Importance of every point."""
     for p in range(X.shape[0]):
-        out[p] = importance_of(code, X, normals, boundary, p, dn[p], dn_cnt[p])
+        out[p] = importance_of(code, X, normals, boundary, p, dn[p], dn_cnt[p], weight)

@@ -65,13 +65,14 @@ def _max_count(cnt, items, k):
 
 @jit
 def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
-                  boundary, removable, importance, tie, code, guard, guard_value, n_steps, half,
-                  tol):
+                  boundary, removable, importance, tie, code, weight, guard, guard_value, n_steps,
+                  half, tol):
     """Remove up to ``n_steps`` points, least important first.
 
     Mutates the neighbour lists, local meshes, normals and importance in place (for the
     remaining points). ``removable`` marks the candidates (not boundary, not frozen, alive);
-    ``tie`` (uint64) breaks importance ties (see :mod:`.heap`). ``guard`` / ``guard_value``
+    ``tie`` (uint64) breaks importance ties (see :mod:`.heap`); ``code`` and ``weight`` select the
+    importance measure (:func:`.importance.importance_of`). ``guard`` / ``guard_value``
     select a guard rule (:data:`GUARDS`) that can veto a removal; a vetoed point is kept.
 
     Returns
@@ -161,7 +162,8 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
             if mesh_changed[a] and removable[a] and stamp[a] != step + 1:
                 stamp[a] = step + 1
                 heap.update(hp, pos, importance, tie, a,
-                            importance_of(code, X, normals, boundary, a, dn[a], dn_cnt[a]),
+                            importance_of(code, X, normals, boundary, a, dn[a], dn_cnt[a],
+                                          weight),
                             size)
             if not normal_changed[a]:
                 continue
@@ -178,7 +180,8 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
                 if uses:
                     stamp[x] = step + 1
                     heap.update(hp, pos, importance, tie, x,
-                                importance_of(code, X, normals, boundary, x, dn[x], dn_cnt[x]),
+                                importance_of(code, X, normals, boundary, x, dn[x], dn_cnt[x],
+                                              weight),
                                 size)
         for j in range(k):
             mesh_changed[link[j]] = False

@@ -2,7 +2,8 @@
 
 The public front door of the core: validates and converts once, then chains the paper's steps,
 each in its own module — :mod:`.voronoi` (``VN_p``), :mod:`.local_mesh` (``DN_p``),
-:mod:`.normals`, :mod:`.boundary`, :mod:`.importance` (Eq. (1)) and :mod:`.removal`.
+:mod:`.normals`, :mod:`.boundary` (+ :mod:`.edge_fit` beyond the paper), :mod:`.importance`
+(Eq. (1)) and :mod:`.removal`.
 """
 
 import time
@@ -13,8 +14,9 @@ import numpy as np
 
 from ..errors import BudgetWarning, InputError
 from . import boundary as boundary_mod
+from . import edge_fit
 from .heap import coordinate_hash
-from .importance import MEASURES, all_importance
+from .importance import MEASURES, all_importance, coverage_weight
 from .local_mesh import MAX_DN, all_local_meshes
 from .normals import all_normals
 from .options import SimplifyOptions
@@ -92,6 +94,45 @@ def neighbourhoods(Xu, scale):
                           normals.copy(), how)
 
 
+def median_spacing(Xu, st):
+    """Median distance from a point to its nearest neighbour (0 for fewer than 2 points)."""
+    if Xu.shape[0] < 2:
+        return 0.0
+    nn = np.empty(Xu.shape[0])
+    edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
+    return float(np.median(nn))
+
+
+def boundary_flags(Xu, st, options):
+    """Paper step 3: ``(deviation, boundary flags, threshold)`` as the options' mode says.
+
+    ``"paper"``: the one-ring measure with the automatic threshold (§3.1). ``"coverage"``: the
+    two-ring measure, candidates above the threshold, then only those within
+    ``options.edge_width`` local spacings of a fitted edge line (:mod:`.edge_fit`).
+    """
+    m = Xu.shape[0]
+    deviation = np.zeros(m)
+    if options.mode == "paper":
+        boundary_mod.all_deviations(Xu, st.normals, st.dn, st.dn_cnt, deviation)
+        if not options.detect_boundary:
+            return deviation, np.zeros(m, dtype=bool), float("inf")
+        flags, threshold = boundary_mod.detect(
+            deviation, threshold=options.boundary_threshold, k=options.boundary_k,
+            floor=options.boundary_floor)
+        return deviation, flags, threshold
+    smooth = np.zeros((m, 3))
+    edge_fit.smoothed_deviations(Xu, st.dn, st.dn_cnt, smooth, deviation)
+    if not options.detect_boundary:
+        return deviation, np.zeros(m, dtype=bool), float("inf")
+    threshold = (edge_fit.CANDIDATE if options.boundary_threshold is None
+                 else float(options.boundary_threshold))
+    nn = np.empty(m)
+    edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
+    distance = np.empty(m)
+    edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, distance)
+    return deviation, distance <= options.edge_width, threshold
+
+
 def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
     """Simplify a point cloud, keeping (and flagging) every point on or near a sharp edge.
 
@@ -109,7 +150,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
     frozen : bool array (n,), optional
         Points that are never removed but act as neighbours (a tile's halo).
     options : SimplifyOptions or dict, optional
-        Algorithm options; the paper's behaviour by default.
+        Algorithm options; mode "coverage" by default (``mode="paper"``: as published).
 
     Returns
     -------
@@ -172,18 +213,16 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
     stats["mean_voronoi_degree"] = float(st.cnt.mean()) if m else 0.0
     stats["mean_local_mesh_degree"] = float(st.dn_cnt.mean()) if m else 0.0
     lap("neighbours_normals")
-    deviation_u = np.zeros(m)
-    boundary_mod.all_deviations(Xu, st.normals, st.dn, st.dn_cnt, deviation_u)
-    if options.detect_boundary:
-        boundary_u, threshold = boundary_mod.detect(
-            deviation_u, threshold=options.boundary_threshold, k=options.boundary_k,
-            floor=options.boundary_floor)
-    else:
-        boundary_u, threshold = np.zeros(m, dtype=bool), float("inf")
+    deviation_u, boundary_u, threshold = boundary_flags(Xu, st, options)
     lap("boundary")
     code = MEASURES[options.importance]
+    weight = 0.0
+    if options.importance == "coverage":
+        spacing = options.spacing if options.spacing is not None else median_spacing(Xu, st)
+        weight = coverage_weight(spacing, options.coverage) if spacing > 0 else 0.0
+        stats["spacing"] = float(spacing)
     imp_u = np.zeros(m)
-    all_importance(code, Xu, st.normals, boundary_u, st.dn, st.dn_cnt, imp_u)
+    all_importance(code, Xu, st.normals, boundary_u, st.dn, st.dn_cnt, weight, imp_u)
     lap("importance")
 
     # 5. progressive removal: duplicate copies first (importance 0), then the greedy sequence
@@ -196,7 +235,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
     steps = int(removable_u.sum()) if options.progressive else max(0, n_remove - dup_order.size)
     order_u, at_u, st.pool = remove_points(
         Xu, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, boundary_u, removable_u.copy(), imp_u, coordinate_hash(X[rep]), code,
+        st.normals, boundary_u, removable_u.copy(), imp_u, coordinate_hash(X[rep]), code, weight,
         GUARDS[options.guard], float(options.max_spacing or 0.0), steps, BOX_FACTOR * D,
         TOL_FACTOR * D)
     lap("removal")

@@ -19,7 +19,7 @@ import dask
 import numpy as np
 
 from .. import __version__
-from ..core import SimplifyOptions
+from ..core import SimplifyOptions, edge_fit
 from ..core.result import resolve_target
 from ..errors import InputError
 from ..io.points_out import write_points
@@ -35,7 +35,8 @@ SCHEDULERS = ("threads", "processes", "synchronous")
 
 @dataclass
 class RunSummary:
-    """What a run did: counts, the threshold used, seconds per stage."""
+    """What a run did: counts, the boundary threshold and point spacing used, seconds per
+    stage."""
 
     n_input: int
     n_output: int
@@ -43,6 +44,7 @@ class RunSummary:
     n_boundary: int
     n_tiles: int
     threshold: float
+    spacing: float
     store: str
     output: str
     reached: bool
@@ -104,7 +106,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         ``.csv``.
     ratio, count : exactly one — the fraction or number of points to keep overall.
     options : SimplifyOptions or dict, optional
-        Core options; a fixed ``boundary_threshold`` skips the global threshold pass.
+        Core options. Mode ``"paper"`` finds one boundary threshold for all tiles in a
+        first pass (a fixed ``boundary_threshold`` skips it); every mode gets one point
+        spacing for all tiles (``options.spacing``, else the store's estimate).
     client : dask.distributed.Client, optional
         Run tiles on this cluster (``scheduler`` is then ignored).
     scheduler : {"threads", "processes", "synchronous"} or "tcp://HOST:PORT"
@@ -171,12 +175,15 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                      n, ts.n_tiles, ts.halo, ts.spacing, time.perf_counter() - t)
         seconds["ingest"] = time.perf_counter() - t
 
-        # global boundary threshold: one value for every tile
+        # mode "paper": one global boundary threshold for every tile (mode "coverage" flags
+        # edges by a fixed candidate angle and a local edge fit: nothing global to find)
         t = time.perf_counter()
         threshold = options.boundary_threshold
+        if threshold is None and options.mode != "paper":
+            threshold = edge_fit.CANDIDATE
         if threshold is None:
             threshold = ts.run_attrs.get("threshold")
-        if threshold is None and options.detect_boundary:
+        if threshold is None and options.detect_boundary and options.mode == "paper":
             hist = _compute([dask.delayed(deviation_histogram)(str(store_path), i, opts)
                              for i in range(ts.n_tiles)], scheduler, workers, client, progress)
             threshold = threshold_from_histogram(np.sum(hist, axis=0), options.boundary_k,
@@ -184,7 +191,12 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             ts.set_run_attrs({"threshold": threshold})
         seconds["threshold"] = time.perf_counter() - t
 
-        # per tile, halo frozen
+        # per tile, halo frozen; one spacing for the coverage measure of every tile
+        spacing = options.spacing
+        if spacing is None and ts.spacing > 0:
+            spacing = ts.spacing
+        if spacing is not None:
+            opts = {**opts, "spacing": spacing}
         t = time.perf_counter()
         pending = ts.pending_tiles()
         thr = threshold if options.detect_boundary else None
@@ -214,6 +226,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         log.warning("%s", message)
     summary = RunSummary(n_input=n, n_output=n_out, target=target, n_boundary=n_boundary,
                          n_tiles=ts.n_tiles, threshold=float(threshold or float("nan")),
+                         spacing=float(spacing or float("nan")),
                          store=str(store_path) if tmp is None else "", output=str(output),
                          reached=reached, message=message, seconds=seconds)
     log.info("kept %d of %d points (%d boundary) in %.1f s: %s", n_out, n,

@@ -53,11 +53,24 @@ def threshold_from_histogram(hist, k, floor):
     return max(float(med + k * 1.4826 * mad), float(floor))
 
 
+def _halo_frozen(frozen, options):
+    """The halo is frozen in mode "paper"; in mode "coverage" it is simplified with the core.
+
+    The coverage measure sees the spacing of a point's neighbours. A frozen halo keeps full
+    density to the end, so core points along the tile border look crowded and go first:
+    measured on the Bunny in 8 tiles, the kept density in a band two spacings wide around the
+    tile faces fell to 0.47 of the untiled run's. Simplifying the halo too (its results are
+    discarded; the neighbouring tile owns those points) lets the border see a neighbourhood
+    thinned as the untiled run would thin it.
+    """
+    return frozen if options.mode == "paper" else None
+
+
 def simplify_tile(store_path, tile, options, threshold):
     """Simplify one tile with its halo frozen; write the core points' results; mark done.
 
-    Results per core point: ``step`` (position in the tile's removal sequence, -1 if never
-    removed), ``importance`` (at removal, NaN if never removed), ``boundary``, ``normal``.
+    Results per core point: ``step`` (position among the core points in the tile's removal
+    sequence, -1 if never removed), ``importance`` (at removal, NaN if never removed), ``boundary``, ``normal``.
     The tile is run progressively to the end, so the global budget can cut it anywhere.
     """
     t0 = time.perf_counter()
@@ -70,9 +83,11 @@ def simplify_tile(store_path, tile, options, threshold):
     if n_core:
         opts = SimplifyOptions(**{**options, "boundary_threshold": threshold,
                                   "progressive": True})
-        res = simplify_points(xyz, count=len(xyz), frozen=frozen, options=opts)
-        step[res.order] = np.arange(res.order.size)
-        imp[res.order] = res.order_importance
+        res = simplify_points(xyz, count=len(xyz), frozen=_halo_frozen(frozen, opts),
+                              options=opts)
+        core = res.order < n_core
+        step[res.order[core]] = np.arange(int(core.sum()))
+        imp[res.order[core]] = res.order_importance[core]
         boundary = res.boundary[:n_core]
         normal = res.normals[:n_core].astype(np.float32)
     store.write_result(tile, {"step": step, "importance": imp, "boundary": boundary,
