@@ -321,8 +321,8 @@ def _fps(X, count, *, seed=0):
 #: name -> (function, modules it needs, makes new points?)
 PEERS = {
     "random": (random_sample, (), False),
-    "voxel grid (numpy, nearest to centroid)": (voxel_grid, (), False),
-    "voxel grid (Open3D, centroids)": (_open3d_voxel, ("open3d",), True),
+    "voxel grid (numpy: nearest to centroid)": (voxel_grid, (), False),
+    "voxel grid (Open3D: centroids)": (_open3d_voxel, ("open3d",), True),
     "Poisson disk (MeshLab)": (_poisson_disk, ("pymeshlab",), False),
     "CGAL hierarchy": (_cgal_hierarchy, ("CGAL.CGAL_Point_set_processing_3",), False),
     "CGAL grid": (_cgal_grid, ("CGAL.CGAL_Point_set_processing_3",), False),
