@@ -234,19 +234,29 @@ def _cgal_hierarchy(X, count, *, seed=0, size=100):
 
     ``size`` (max cluster size) as in CGAL's own example; the ``maximum_variation`` knob
     (surface variation above which a cluster is split — the adaptive part) is bisected.
-    If even the largest variation keeps too many points, ``size`` is raised.
+    If even the largest variation keeps too many points, ``size`` is doubled; if even the
+    smallest keeps too few (exactly planar faces have variation 0), it is halved.
     """
     import CGAL.CGAL_Point_set_processing_3 as psp
 
     ps = _cgal_point_set(X)
     n = len(X)
-    while True:
-        psp.hierarchy_simplify_point_set(ps, size=size, maximum_variation=1 / 3)
+
+    def kept_at(size, var):
+        psp.hierarchy_simplify_point_set(ps, size=size, maximum_variation=var)
         c = ps.size()
         ps.cancel_removals()
-        if c <= count or size > n:
+        return c
+
+    # the count must lie between the counts at the largest and the smallest variation; on
+    # exactly planar parts the variation is 0 and only `size` splits clusters
+    for _ in range(30):
+        if kept_at(size, 1 / 3) > count and size < n:
+            size *= 2
+        elif kept_at(size, 1e-7) < count and size > 2:
+            size = max(2, size // 2)
+        else:
             break
-        size *= 2
 
     def call(var):
         t = time.perf_counter()
@@ -256,7 +266,7 @@ def _cgal_hierarchy(X, count, *, seed=0, size=100):
         ps.cancel_removals()
         return int(keep.sum()), keep, sec
 
-    var, keep, sec, calls = drive(call, 1e-4, 1 / 3, count, decreasing=True)
+    var, keep, sec, calls = drive(call, 1e-7, 1 / 3, count, decreasing=True)
     return Kept(X[keep], keep, sec, f"size={size}, max_variation={var:.4g}",
                 extra={"calls": calls})
 
