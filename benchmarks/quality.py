@@ -22,6 +22,10 @@ Cases (``--list``): ``bunny`` (35,947 points, 10 %, paper Fig. 3); ``fandisk`` (
     python benchmarks/quality.py --cases fandisk,block-scan0.2 --json out.json
     python benchmarks/quality.py --cases all --skip "CGAL WLOP"
     python benchmarks/quality.py --list
+    python benchmarks/quality.py --from-json out.json       # tables + summary, no new run
+
+The summary table gives, per case and mode, our value against the best peer's at the same
+count (bold where ours is at least as good).
 """
 
 from __future__ import annotations
@@ -57,6 +61,9 @@ PARTS = {
     "cycloidal": "trimesh_cad/cycloidal.ply.gz",
 }
 NOISES = (0.1, 0.2)
+#: earlier labels of peers, so that older --json files print with today's names
+RENAMED = {"voxel grid (numpy, nearest to centroid)": "voxel grid (numpy: nearest to centroid)",
+           "voxel grid (Open3D, centroids)": "voxel grid (Open3D: centroids)"}
 QUICK = ("bunny", "fandisk", "fandisk-scan0.1")
 
 
@@ -234,6 +241,44 @@ def table(result):
     return "\n".join(lines)
 
 
+def _best(rows, key, lower):
+    rows = [r for r in rows if r.get(key) is not None and not math.isnan(r[key])]
+    if not rows:
+        return None, "–"
+    r = (min if lower else max)(rows, key=lambda r: r[key])
+    return r[key], r["method"]
+
+
+def summary(results):
+    """One row per case and mode: ours against the best peer at the count the mode kept."""
+    lines = ["| case | points | mode | kept (target) | edge cov.: ours / best peer "
+             "| mean err: ours / best peer | Hausdorff: ours / best peer |",
+             "|---|---:|---|---:|---|---|---|"]
+    for res in results:
+        for r in res["rows"]:
+            if r["boundary"] is None:
+                continue
+            peers_here = [p for p in res["rows"] if p["boundary"] is None
+                          and p["method"] != "(input: all points)"
+                          and p["count_target"] == r["group"]]
+            cells = []
+            for key, lower, scale, digits in (("edge_coverage", False, 1, 3),
+                                              ("surface_error_mean", True, 1e4, 1),
+                                              ("hausdorff", True, 1e4, 0)):
+                v, who = _best(peers_here, key, lower)
+                mine = r.get(key)
+                if mine is None or v is None:
+                    cells.append("–")
+                    continue
+                win = (mine <= v) if lower else (mine >= v)
+                mark = "**" if win else ""
+                cells.append(f"{mark}{scale * mine:.{digits}f}{mark} / "
+                             f"{scale * v:.{digits}f} ({who})")
+            lines.append(f"| {res['case']} | {res['n']:,} | {r['method'].split()[-1]} "
+                         f"| {r['kept']:,} ({res['target']:,}) | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--cases", default=None,
@@ -247,7 +292,22 @@ def main(argv=None):
     p.add_argument("--lidar-points", type=int, default=None,
                    help="crop the LiDAR file to this many points around its centre")
     p.add_argument("--json", default=None, help="also write every number to this JSON file")
+    p.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
+                   help="print the tables and the summary of earlier --json runs; run nothing")
     args = p.parse_args(argv)
+    if args.from_json:
+        by_case = {}  # a case run again in a later file replaces the earlier one
+        for f in args.from_json:
+            for r in json.loads(Path(f).read_text()):
+                for row in r["rows"]:
+                    row["method"] = RENAMED.get(row["method"], row["method"])
+                by_case[r["case"]] = r
+        results = list(by_case.values())
+        for res in results:
+            print(table(res))
+        print("### Summary: ours against the best peer at the same count\n")
+        print(summary(results))
+        return 0
     if args.list:
         print("\n".join(case_names()))
         print("groups:", ", ".join(_groups()))
@@ -285,6 +345,8 @@ def main(argv=None):
         print(table(res), flush=True)
         if args.json:  # after every case, so a long run that is stopped keeps what it did
             Path(args.json).write_text(json.dumps(results, indent=1, default=float))
+    print("### Summary: ours against the best peer at the same count\n")
+    print(summary(results))
     return 0
 
 
