@@ -90,7 +90,46 @@ def _parser():
                    help="original point spacing (default: median nearest-neighbour distance)")
     e.add_argument("--json", action="store_true", help="print JSON instead of a table")
     e.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
+
+    rp = sub.add_parser(
+        "report", help="figures and a quality summary of a simplified cloud",
+        description="Draw the original cloud, its sharp-edge points (the RESULT's sharp_edge "
+                    "flags) and the simplified cloud, like the paper's Figs. 2-3, and write "
+                    "report.md with the quality measures of 'tiledsimplify evaluate'. Needs "
+                    "matplotlib: pip install 'tiledsimplify[report]'.")
+    rp.add_argument("input", help="the original points (any input format)")
+    rp.add_argument("result", help="the simplified points, ideally a tiledsimplify output "
+                                   "(LAS/LAZ, PLY, NPY, XYZ/CSV with columns)")
+    rp.add_argument("-o", "--output", required=True, help="directory for the PNGs and "
+                                                          "report.md (created if missing)")
+    rp.add_argument("--mesh", help="a CAD mesh of the part: also measure sharp-edge coverage "
+                                   "and boundary precision/recall")
+    rp.add_argument("--spacing", type=float, default=None,
+                    help="original point spacing (default: median nearest-neighbour distance)")
+    rp.add_argument("--up", choices=("x", "y", "z"), default=None,
+                    help="model axis drawn upwards (default: z for LAS/LAZ input, else y)")
+    rp.add_argument("--view", default="20,-60",
+                    help="camera elevation,azimuth in degrees (default 20,-60)")
+    rp.add_argument("--max-plot-points", type=int, default=200_000,
+                    help="draw at most this many points per panel (default 200000)")
+    rp.add_argument("--dpi", type=int, default=150,
+                    help="pixels per inch; a panel is 6 x dpi pixels square (default 150)")
+    rp.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
     return p
+
+
+def _report(args):
+    from .report import make_report
+    try:
+        elev, azim = (float(v) for v in args.view.split(","))
+    except ValueError:
+        raise TiledSimplifyError(f"--view must be ELEVATION,AZIMUTH in degrees, e.g. 20,-60; "
+                                 f"got {args.view!r}.") from None
+    rep = make_report(args.input, args.result, args.output, mesh=args.mesh,
+                      spacing=args.spacing, up=args.up, elev=elev, azim=azim,
+                      max_plot_points=args.max_plot_points, dpi=args.dpi)
+    log.info("wrote %s", ", ".join(str(p) for p in rep.files.values()))
+    return EXIT_OK
 
 
 def _evaluate(args):
@@ -185,12 +224,13 @@ def main(argv=None):
     logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
                         format="%(asctime)s %(levelname)s %(message)s", stream=sys.stderr)
     try:
-        command = {"run": _run, "simplify": _simplify, "evaluate": _evaluate}[args.command]
+        command = {"run": _run, "simplify": _simplify, "evaluate": _evaluate,
+                   "report": _report}[args.command]
         return command(args)
     except FileNotFoundError as exc:
         log.error("%s: file not found. Check the path.", exc.filename or exc)
         return EXIT_INPUT
-    except (TiledSimplifyError, ValueError) as exc:
+    except (TiledSimplifyError, ValueError, ImportError) as exc:
         log.error("%s", exc)
         return EXIT_INPUT
 
