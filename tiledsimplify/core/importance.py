@@ -7,8 +7,8 @@ A point whose neighbours are all boundary points has no defined importance; it g
 and so is removed only after every point that has one.
 
 Beyond the paper, ``"coverage"`` adds the hole a removal would open:
-``i(p) = Eq.(1) + w · ρ(p)²`` with ``ρ(p)²`` the mean squared distance from ``p`` to its local-mesh
-neighbours (boundary ones included). On a plane Eq. (1) is ~0 for every point, so the paper's
+``i(p) = Eq.(1) + w · ρ(p)²`` with ``ρ(p)²`` the mean squared distance from ``p`` to its
+local-mesh neighbours (boundary ones included). On a plane Eq. (1) is ~0 for every point, so the paper's
 greedy empties flat faces; the ``ρ²`` term makes it thin them evenly instead (dense spots go
 first, as in Poisson-disk sample elimination), and a point whose neighbours are already far
 apart is expensive to remove. ``w`` has units of 1/length: a sphere of curvature ``κ`` gives

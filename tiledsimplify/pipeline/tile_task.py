@@ -70,7 +70,8 @@ def simplify_tile(store_path, tile, options, threshold):
     """Simplify one tile with its halo frozen; write the core points' results; mark done.
 
     Results per core point: ``step`` (position among the core points in the tile's removal
-    sequence, -1 if never removed), ``importance`` (at removal, NaN if never removed), ``boundary``, ``normal``.
+    sequence, -1 if never removed), ``importance`` (at removal, NaN if never removed),
+    ``boundary``, ``normal``.
     The tile is run progressively to the end, so the global budget can cut it anywhere.
     """
     t0 = time.perf_counter()
