@@ -135,6 +135,21 @@ def _plane_fit(X, idx, c, side, which, centre, normal, work):
 
 
 @jit
+def _least_parallel(normals, idx, c, ref):
+    """The point of ``idx[:c]`` whose normal is least parallel to ``ref``'s (ties: first)."""
+    arg = ref
+    best = 2.0
+    for j in range(c):
+        q = idx[j]
+        d = abs(normals[ref, 0] * normals[q, 0] + normals[ref, 1] * normals[q, 1]
+                + normals[ref, 2] * normals[q, 2])
+        if d < best:
+            best = d
+            arg = q
+    return arg
+
+
+@jit
 def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing):
     """Step 2: distance from ``idx[0]`` to the edge of a two-plane fit of ``idx[:c]``.
 
@@ -149,24 +164,8 @@ def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing):
     max_rms = MAX_RMS * spacing
     p = idx[0]
     # seeds: the normal least parallel to p's, then the one least parallel to that
-    a = p
-    best = 2.0
-    for j in range(c):
-        q = idx[j]
-        d = abs(normals[p, 0] * normals[q, 0] + normals[p, 1] * normals[q, 1]
-                + normals[p, 2] * normals[q, 2])
-        if d < best:
-            best = d
-            a = q
-    b = a
-    best = 2.0
-    for j in range(c):
-        q = idx[j]
-        d = abs(normals[a, 0] * normals[q, 0] + normals[a, 1] * normals[q, 1]
-                + normals[a, 2] * normals[q, 2])
-        if d < best:
-            best = d
-            b = q
+    a = _least_parallel(normals, idx, c, p)
+    b = _least_parallel(normals, idx, c, a)
     for j in range(c):
         q = idx[j]
         da = abs(normals[a, 0] * normals[q, 0] + normals[a, 1] * normals[q, 1]
