@@ -66,13 +66,16 @@ def _max_count(cnt, items, k):
 @jit
 def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
                   boundary, removable, importance, tie, code, guard, guard_value, n_steps, half,
-                  tol):
+                  tol, stop_above=math.inf):
     """Remove up to ``n_steps`` points, least important first.
 
     Mutates the neighbour lists, local meshes, normals and importance in place (for the
     remaining points). ``removable`` marks the candidates (not boundary, not frozen, alive);
     ``tie`` (uint64) breaks importance ties (see :mod:`.heap`). ``guard`` / ``guard_value``
     select a guard rule (:data:`GUARDS`) that can veto a removal; a vetoed point is kept.
+    The loop also stops right after a removal whose importance exceeds ``stop_above``: the
+    recorded sequence then holds every step whose running maximum of importance at removal is
+    at most ``stop_above`` (the prefix does not depend on where the loop stops).
 
     Returns
     -------
@@ -184,4 +187,6 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
             mesh_changed[link[j]] = False
             normal_changed[link[j]] = False
         step += 1
+        if at[step - 1] > stop_above:
+            break  # every later step has a running maximum above stop_above
     return order[:step], at[:step], pool
