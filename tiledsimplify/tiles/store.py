@@ -9,6 +9,8 @@ Layout of the store directory (a zarr v3 group)::
     tiles/<id>/result/<name>       (k, ...)        written by :meth:`TileStore.write_result`;
                                                    the result group's attribute ``done`` is
                                                    set true only after all its arrays are written
+    tiles/<id>/state/<name>        any shape       scratch state one pass leaves for the next
+                                                   (:meth:`TileStore.write_state`), same rule
 
 Root attributes: ``format``/``format_version``, ``complete`` (false until the ingest has
 finished), ``plan`` (:meth:`TilePlan.to_dict`), ``halo``, ``halo_is_default``, ``spacing``,
@@ -864,7 +866,7 @@ class TileStore:
         return list(g.attrs.get("names", []))
 
     def write_result(self, tile: int, arrays: Mapping[str, Any], *,
-                     overwrite: bool = False) -> None:
+                     overwrite: bool = False, attrs: Mapping[str, Any] | None = None) -> None:
         """Write a tile's result arrays, then mark the tile done.
 
         Each array runs over the tile's core points (first dimension = :meth:`count`). The
@@ -880,6 +882,8 @@ class TileStore:
             Numeric or bool arrays of shape (count, ...).
         overwrite : bool, default False
             Replace a tile that is already done.
+        attrs : mapping, optional
+            JSON-serialisable values stored with the result (:meth:`result_attrs`).
 
         Raises
         ------
@@ -918,7 +922,54 @@ class TileStore:
         for name, arr in data.items():
             rg.create_array(name, data=arr, chunks=(rows,) + arr.shape[1:],
                             compressors=_codec())
-        rg.update_attributes({"done": True, "names": list(data), "written_utc": _now()})
+        extra = json.loads(json.dumps(dict(attrs or {})))
+        rg.update_attributes({"attrs": extra, "done": True, "names": list(data),
+                              "written_utc": _now()})
+
+    def result_attrs(self, tile: int) -> dict:
+        """The ``attrs`` stored with a done tile's result (empty if none or not done)."""
+        g = self._result_group(self._tile(tile))
+        if g is None or g.attrs.get("done") is not True:
+            return {}
+        return dict(g.attrs.get("attrs", {}))
+
+    # ------------------------------------------------------------------ scratch state
+    def write_state(self, tile: int, arrays: Mapping[str, Any],
+                    attrs: Mapping[str, Any] | None = None) -> None:
+        """Save a tile's intermediate state: arrays of any length, at ``tiles/<id>/state``.
+
+        For work one pass of a run computes and a later pass reuses (the neighbourhoods of
+        the tile's points). Like results, the state counts only once all arrays are written;
+        an earlier state is replaced.
+        """
+        t = self._tile(tile)
+        tg = zarr.open_group(self._store, path=f"tiles/{t}", mode="r+")
+        if "state" in tg:
+            del tg["state"]
+        sg = tg.create_group("state", attributes={"done": False})
+        for name, arr in arrays.items():
+            arr = np.ascontiguousarray(arr)
+            rows = max(1, (1 << 20) // max(1, arr[:1].nbytes))
+            sg.create_array(str(name), data=arr, chunks=(rows,) + arr.shape[1:],
+                            compressors=_codec())
+        sg.update_attributes({"attrs": json.loads(json.dumps(dict(attrs or {}))),
+                              "names": list(arrays), "done": True})
+
+    def read_state(self, tile: int) -> tuple[dict[str, np.ndarray], dict] | None:
+        """A tile's state saved by :meth:`write_state`: ``(arrays, attrs)``, or None."""
+        try:
+            g = zarr.open_group(self._store, path=f"tiles/{self._tile(tile)}/state", mode="r")
+        except (FileNotFoundError, KeyError):
+            return None
+        if g.attrs.get("done") is not True:
+            return None
+        return {n: g[n][:] for n in g.attrs["names"]}, dict(g.attrs.get("attrs", {}))
+
+    def delete_state(self, tile: int) -> None:
+        """Remove a tile's state (if any) to free the disk space."""
+        tg = zarr.open_group(self._store, path=f"tiles/{self._tile(tile)}", mode="r+")
+        if "state" in tg:
+            del tg["state"]
 
     def read_result(self, tile: int, name: str) -> np.ndarray:
         """Read one result array of a done tile.
