@@ -1,7 +1,8 @@
 """``run``: the tiled pipeline, from input file(s) to one simplified output.
 
-    input → tile store (zarr: count-balanced tiles, halos) → global boundary threshold →
-    per-tile simplification with the halo frozen (dask) → one global budget → output
+    input → tile store (zarr: count-balanced tiles, halos) → neighbourhoods of every tile and
+    one global boundary threshold → per-tile simplification with the halo frozen, down to a
+    floor (dask) → one global budget (tiles it reaches past their floor run deeper) → output
 
 Stages are resumable: an existing, complete store for the same input and settings is reused,
 finished tiles are not recomputed, and the output is rewritten from the stored results.
@@ -10,6 +11,8 @@ finished tiles are not recomputed, and the output is rewritten from the stored r
 import hashlib
 import json
 import logging
+import math
+import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
@@ -17,15 +20,16 @@ from pathlib import Path
 
 import dask
 import numpy as np
+from dask.callbacks import Callback
 
 from .. import __version__
 from ..core import SimplifyOptions
 from ..core.result import resolve_target
-from ..errors import InputError
+from ..errors import InputError, TiledSimplifyError
 from ..io.points_out import write_points
 from ..io.sources import open_source
 from ..tiles import TileStore
-from .budget import kept_in_tile, store_cut
+from .budget import deeper_tiles, global_cut, kept_in_tile, store_sequences
 from .tile_task import deviation_histogram, simplify_tile, threshold_from_histogram
 
 log = logging.getLogger("tiledsimplify")
@@ -35,7 +39,7 @@ SCHEDULERS = ("threads", "processes", "synchronous")
 
 @dataclass
 class RunSummary:
-    """What a run did: counts, the threshold used, seconds per stage."""
+    """What a run did: counts, the threshold used, tiles run deeper, seconds per stage."""
 
     n_input: int
     n_output: int
@@ -43,6 +47,7 @@ class RunSummary:
     n_boundary: int
     n_tiles: int
     threshold: float
+    n_deeper: int
     store: str
     output: str
     reached: bool
@@ -61,36 +66,98 @@ def _fingerprint(source, settings):
     return h.hexdigest()[:20]
 
 
-def _compute(tasks, scheduler, workers, client, progress):
-    """Run dask delayed ``tasks`` on the chosen scheduler; returns their results in order."""
+class _Progress:
+    """Per-task progress of one stage: a log line per finished tile (from the calling
+    process, so it is not lost in worker processes) and, on a terminal, a bar redrawn below
+    the log lines."""
+
+    def __init__(self, stage, total, describe, bar, out=None):
+        self.stage, self.total, self.describe = stage, total, describe
+        self.out = sys.stderr if out is None else out
+        self.bar = bar and hasattr(self.out, "isatty") and self.out.isatty()
+        self.done = 0
+        self.t0 = time.perf_counter()
+
+    def __call__(self, result):
+        self.done += 1
+        if self.bar:
+            self.out.write("\r\033[K")
+        if self.describe is not None:
+            self.describe(result, self.done, self.total)
+        if self.bar:
+            self.draw()
+
+    def draw(self):
+        frac = self.done / self.total if self.total else 1.0
+        elapsed = time.perf_counter() - self.t0
+        left = elapsed * (1 - frac) / frac if frac else float("nan")
+        width = 30
+        fill = int(round(width * frac))
+        self.out.write(f"\r{self.stage} [{'#' * fill}{' ' * (width - fill)}] {self.done}/"
+                       f"{self.total} tiles {100 * frac:3.0f}% | {elapsed:.0f} s"
+                       + (f", ~{left:.0f} s left" if 0 < frac < 1 else ""))
+        self.out.flush()
+
+    def close(self):
+        if self.bar:
+            self.out.write("\n")
+            self.out.flush()
+
+
+def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describe=None):
+    """Run dask delayed ``tasks`` on the chosen scheduler; returns their results in order.
+
+    ``describe(result, done, total)`` is called in this process as each task finishes (any
+    scheduler); ``progress`` adds a bar on a terminal.
+    """
     if client is None and isinstance(scheduler, str) and scheduler.startswith("tcp://"):
         from distributed import Client
         with Client(scheduler) as c:
-            return _compute(tasks, None, workers, c, progress)
-    if client is not None:
-        futures = client.compute(tasks)
-        if progress:
-            from distributed import progress as dprogress
-            dprogress(futures)
-        return client.gather(futures)
-    if scheduler not in SCHEDULERS:
-        raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, got "
-                         f"{scheduler!r}.")
-    kw = {"scheduler": scheduler}
-    if workers and scheduler != "synchronous":
-        kw["num_workers"] = int(workers)
-    if progress:
-        import sys
+            return _compute(tasks, None, workers, c, progress, stage, describe)
+    report = _Progress(stage, len(tasks), describe, progress)
+    if report.bar:
+        report.draw()
+    try:
+        if client is not None:
+            from distributed import as_completed
+            futures = client.compute(tasks)
+            for fut in as_completed(futures):
+                report(fut.result())
+            return client.gather(futures)
+        if scheduler not in SCHEDULERS:
+            raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, "
+                             f"got {scheduler!r}.")
+        kw = {"scheduler": scheduler}
+        if workers and scheduler != "synchronous":
+            kw["num_workers"] = int(workers)
+        keys = {t.key for t in tasks}
 
-        from dask.diagnostics import ProgressBar
-        with ProgressBar(out=sys.stderr):
+        def posttask(key, result, dsk, state, worker_id):
+            if key in keys:
+                report(result)
+
+        with Callback(posttask=posttask):
             return list(dask.compute(*tasks, **kw))
-    return list(dask.compute(*tasks, **kw))
+    finally:
+        report.close()
+
+
+def _tile_line(result, done, total):
+    log.info("tile %d (%d/%d): %d core + %d halo points, %d boundary, %d removals%s, %.1f s",
+             result["tile"], done, total, result["n_core"], result["n_halo"],
+             result["n_boundary"], result["steps"],
+             " (all)" if result["exhausted"] else f" (up to level {result['level']:.3g})",
+             result["seconds"])
+
+
+def _threshold_line(result, done, total):
+    log.debug("tile %d (%d/%d): neighbourhoods and boundary measure in %.1f s",
+              result["tile"], done, total, result["seconds"])
 
 
 def run(input, output, *, ratio=None, count=None, options=None, client=None,
         scheduler="threads", workers=None, store=None, tile_points=500_000, halo=None,
-        chunk_points=1_000_000, progress=False):
+        floor=0.5, chunk_points=1_000_000, progress=False):
     """Simplify a cloud of any size tile by tile and write one output.
 
     Parameters
@@ -117,6 +184,13 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         Points per tile core, at most.
     halo : float, optional
         Halo width in model units; 10 x the estimated point spacing by default.
+    floor : float in (0, 1)
+        How far each tile runs first: until it keeps ``floor`` x the overall kept fraction of
+        its core points (default 0.5: half the target ratio). Tiles the global cut reaches
+        beyond that (flat ones) are run again, deeper, exactly as far as the cut needs; the
+        output does not depend on ``floor``, only the time does. The end of a tile's removal
+        sequence is slow (points around emptied flat faces gain hundreds of Voronoi
+        neighbours), which is why tiles do not simply run to the end.
     chunk_points : int
         Points read per input chunk (bounds ingest memory).
     progress : bool
@@ -136,6 +210,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     source = open_source(input, chunk_points=chunk_points)
     n = source.count
     target = resolve_target(n, ratio, count)
+    if not 0.0 < float(floor) < 1.0:
+        raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
+                         f"first runs down to), got {floor!r}; the default is 0.5.")
     if output.suffix.lower() in (".las", ".laz") and not source.is_las:
         raise InputError(f"{output}: LAS/LAZ output needs LAS/LAZ input (it keeps the input's "
                          "point records); write .ply, .npy, .xyz or .csv instead.")
@@ -171,33 +248,62 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                      n, ts.n_tiles, ts.halo, ts.spacing, time.perf_counter() - t)
         seconds["ingest"] = time.perf_counter() - t
 
-        # global boundary threshold: one value for every tile
+        # neighbourhoods of every tile (saved for the tile pass), one threshold for all tiles
         t = time.perf_counter()
         threshold = options.boundary_threshold
         if threshold is None:
             threshold = ts.run_attrs.get("threshold")
         if threshold is None and options.detect_boundary:
-            hist = _compute([dask.delayed(deviation_histogram)(str(store_path), i, opts)
-                             for i in range(ts.n_tiles)], scheduler, workers, client, progress)
-            threshold = threshold_from_histogram(np.sum(hist, axis=0), options.boundary_k,
-                                                 options.boundary_floor)
+            done = _compute([dask.delayed(deviation_histogram)(str(store_path), i)
+                             for i in range(ts.n_tiles)], scheduler, workers, client, progress,
+                            "neighbours", _threshold_line)
+            threshold = threshold_from_histogram(np.sum([d["hist"] for d in done], axis=0),
+                                                 options.boundary_k, options.boundary_floor)
             ts.set_run_attrs({"threshold": threshold})
-        seconds["threshold"] = time.perf_counter() - t
+            log.info("boundary threshold %.4g from %d tiles in %.1f s", threshold, ts.n_tiles,
+                     time.perf_counter() - t)
+        seconds["neighbours"] = time.perf_counter() - t
 
-        # per tile, halo frozen
+        # per tile, halo frozen, down to the floor
         t = time.perf_counter()
         pending = ts.pending_tiles()
         thr = threshold if options.detect_boundary else None
+        keep_fraction = float(floor) * target / n if n else 0.0
         if pending:
-            done = _compute([dask.delayed(simplify_tile)(str(store_path), i, opts, thr)
-                             for i in pending], scheduler, workers, client, progress)
-            log.info("simplified %d tiles in %.1f s", len(done), time.perf_counter() - t)
+            _compute([dask.delayed(simplify_tile)(
+                str(store_path), i, opts, thr,
+                ("keep", math.ceil(keep_fraction * ts.count(i)))) for i in pending],
+                scheduler, workers, client, progress, "tiles", _tile_line)
+            log.info("simplified %d tiles in %.1f s", len(pending), time.perf_counter() - t)
         seconds["tiles"] = time.perf_counter() - t
 
-        # one global budget, then the output
+        # one global budget; tiles it reaches past their floor run deeper (once suffices)
         t = time.perf_counter()
-        prefix = store_cut(ts, n - target)
+        n_deeper = 0
+        for _ in range(3):
+            seqs, exhausted = store_sequences(ts)
+            need = deeper_tiles(seqs, n - target, exhausted)
+            if not need:
+                break
+            seqs = None  # not held while the deeper pass runs
+            n_deeper += len(need)
+            log.info("the global cut reaches past the floor of %d tile(s): running them deeper",
+                     len(need))
+            _compute([dask.delayed(simplify_tile)(str(store_path), i, opts, thr,
+                                                  ("level", need[i])) for i in sorted(need)],
+                     scheduler, workers, client, progress, "deeper", _tile_line)
+        else:
+            raise TiledSimplifyError(
+                f"{store_path}: the tiles' removal sequences do not agree between passes (the "
+                "global cut still needs deeper tiles after three passes); delete the store and "
+                "run again, and report this as a bug if it persists.")
+        seconds["deeper"] = time.perf_counter() - t
+        t = time.perf_counter()
+        prefix = global_cut(seqs, n - target)
+        del seqs
         n_removed = sum(prefix.values())
+        for i in range(ts.n_tiles):  # the saved neighbourhoods are no longer needed
+            ts.delete_state(i)
         seconds["budget"] = time.perf_counter() - t
         t = time.perf_counter()
         n_out, n_boundary = _write_output(ts, source, output, prefix)
@@ -214,10 +320,12 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         log.warning("%s", message)
     summary = RunSummary(n_input=n, n_output=n_out, target=target, n_boundary=n_boundary,
                          n_tiles=ts.n_tiles, threshold=float(threshold or float("nan")),
+                         n_deeper=n_deeper,
                          store=str(store_path) if tmp is None else "", output=str(output),
                          reached=reached, message=message, seconds=seconds)
-    log.info("kept %d of %d points (%d boundary) in %.1f s: %s", n_out, n,
-             n_boundary, seconds["total"],
+    log.info("kept %d of %d points (%d boundary) from %d tiles (%d run deeper) in %.1f s "
+             "(%.0f input points/s): %s", n_out, n, n_boundary, ts.n_tiles, n_deeper,
+             seconds["total"], n / seconds["total"] if seconds["total"] else 0.0,
              ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items() if k != "total"))
     return summary
 
