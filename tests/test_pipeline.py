@@ -211,14 +211,16 @@ def test_las_end_to_end_keeps_every_dimension(data_dir, tmp_path):
 def test_cli_run_with_config(bunny, tmp_path):
     X, path = bunny
     cfg = tmp_path / "c.toml"
-    cfg.write_text("[run]\nratio = 0.3\ntile_points = 2000\n[simplify]\nmode = 'paper'\n")
+    cfg.write_text("[run]\nratio = 0.3\ntile_points = 2000\nfloor = 0.3\n"
+                   "[simplify]\nmode = 'paper'\n")
     out = tmp_path / "o.npy"
     assert main(["run", str(path), str(out), "--config", str(cfg), "--no-progress", "-q"]) \
         == EXIT_OK
     assert len(np.load(out)) == round(0.3 * len(X))
     assert main(["run", str(path), str(out), "--count", "4000", "--no-progress", "-q",
-                 "--tile-points", "3000"]) == EXIT_OK
+                 "--tile-points", "3000", "--floor", "0.9"]) == EXIT_OK
     assert len(np.load(out)) == 4000
+    assert main(["run", str(path), str(out), "--count", "4000", "-q", "--floor", "1.5"]) == 2
     bad = tmp_path / "bad.toml"
     bad.write_text("[runn]\nratio = 0.3\n")
     assert main(["run", str(path), str(out), "--config", str(bad), "-q"]) == 2

@@ -39,7 +39,11 @@ SCHEDULERS = ("threads", "processes", "synchronous")
 
 @dataclass
 class RunSummary:
-    """What a run did: counts, the threshold used, tiles run deeper, seconds per stage."""
+    """What a run did: counts, the threshold used, tiles run deeper, seconds per stage.
+
+    ``seconds``: wall time per stage and ``total``; ``cpu_seconds``: CPU time of this process
+    per stage (all its threads; not the work of other processes or cluster workers).
+    """
 
     n_input: int
     n_output: int
@@ -53,6 +57,7 @@ class RunSummary:
     reached: bool
     message: str = ""
     seconds: dict = field(default_factory=dict)
+    cpu_seconds: dict = field(default_factory=dict)
 
     def to_dict(self):
         return asdict(self)
@@ -68,13 +73,15 @@ def _fingerprint(source, settings):
 
 class _Progress:
     """Per-task progress of one stage: a log line per finished tile (from the calling
-    process, so it is not lost in worker processes) and, on a terminal, a bar redrawn below
-    the log lines."""
+    process, so it is not lost in worker processes) and, on a terminal or in a notebook, a bar
+    redrawn below the log lines (not in log files: cron and Airflow logs get the lines only)."""
 
     def __init__(self, stage, total, describe, bar, out=None):
         self.stage, self.total, self.describe = stage, total, describe
         self.out = sys.stderr if out is None else out
-        self.bar = bar and hasattr(self.out, "isatty") and self.out.isatty()
+        interactive = "ipykernel" in sys.modules or (
+            hasattr(self.out, "isatty") and self.out.isatty())
+        self.bar = bool(bar) and interactive
         self.done = 0
         self.t0 = time.perf_counter()
 
@@ -201,7 +208,13 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     RunSummary
     """
     t_start = time.perf_counter()
-    seconds = {}
+    seconds, cpu_seconds = {}, {}
+    clock = [time.perf_counter(), time.process_time()]
+
+    def stage(name):  # wall and CPU time of the stage that ends now
+        now = [time.perf_counter(), time.process_time()]
+        seconds[name], cpu_seconds[name] = now[0] - clock[0], now[1] - clock[1]
+        clock[:] = now
     if options is None:
         options = SimplifyOptions()
     elif isinstance(options, dict):
@@ -228,7 +241,6 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     else:
         store_path = Path(store)
     try:
-        t = time.perf_counter()
         ts = None
         if store_path.exists():
             ts = TileStore.open(store_path)
@@ -245,11 +257,10 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 provenance={"input": [str(f) for f in getattr(source, "files", [])],
                             "output": str(output)})
             log.info("ingested %d points into %d tiles (halo %.4g, spacing %.4g) in %.1f s",
-                     n, ts.n_tiles, ts.halo, ts.spacing, time.perf_counter() - t)
-        seconds["ingest"] = time.perf_counter() - t
+                     n, ts.n_tiles, ts.halo, ts.spacing, time.perf_counter() - clock[0])
+        stage("ingest")
 
         # neighbourhoods of every tile (saved for the tile pass), one threshold for all tiles
-        t = time.perf_counter()
         threshold = options.boundary_threshold
         if threshold is None:
             threshold = ts.run_attrs.get("threshold")
@@ -261,11 +272,10 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                                                  options.boundary_k, options.boundary_floor)
             ts.set_run_attrs({"threshold": threshold})
             log.info("boundary threshold %.4g from %d tiles in %.1f s", threshold, ts.n_tiles,
-                     time.perf_counter() - t)
-        seconds["neighbours"] = time.perf_counter() - t
+                     time.perf_counter() - clock[0])
+        stage("neighbours")
 
         # per tile, halo frozen, down to the floor
-        t = time.perf_counter()
         pending = ts.pending_tiles()
         thr = threshold if options.detect_boundary else None
         keep_fraction = float(floor) * target / n if n else 0.0
@@ -274,11 +284,10 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 str(store_path), i, opts, thr,
                 ("keep", math.ceil(keep_fraction * ts.count(i)))) for i in pending],
                 scheduler, workers, client, progress, "tiles", _tile_line)
-            log.info("simplified %d tiles in %.1f s", len(pending), time.perf_counter() - t)
-        seconds["tiles"] = time.perf_counter() - t
+            log.info("simplified %d tiles in %.1f s", len(pending), time.perf_counter() - clock[0])
+        stage("tiles")
 
         # one global budget; tiles it reaches past their floor run deeper (once suffices)
-        t = time.perf_counter()
         n_deeper = 0
         for _ in range(3):
             seqs, exhausted = store_sequences(ts)
@@ -297,21 +306,20 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 f"{store_path}: the tiles' removal sequences do not agree between passes (the "
                 "global cut still needs deeper tiles after three passes); delete the store and "
                 "run again, and report this as a bug if it persists.")
-        seconds["deeper"] = time.perf_counter() - t
-        t = time.perf_counter()
+        stage("deeper")
         prefix = global_cut(seqs, n - target)
         del seqs
         n_removed = sum(prefix.values())
         for i in range(ts.n_tiles):  # the saved neighbourhoods are no longer needed
             ts.delete_state(i)
-        seconds["budget"] = time.perf_counter() - t
-        t = time.perf_counter()
+        stage("budget")
         n_out, n_boundary = _write_output(ts, source, output, prefix)
-        seconds["output"] = time.perf_counter() - t
+        stage("output")
     finally:
         if tmp is not None:
             tmp.cleanup()
     seconds["total"] = time.perf_counter() - t_start
+    cpu_seconds["total"] = sum(cpu_seconds.values())
     reached = n - n_removed == target
     message = "" if reached else (
         f"asked to keep {target} of {n} points, but boundary points alone number more: kept "
@@ -322,7 +330,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          n_tiles=ts.n_tiles, threshold=float(threshold or float("nan")),
                          n_deeper=n_deeper,
                          store=str(store_path) if tmp is None else "", output=str(output),
-                         reached=reached, message=message, seconds=seconds)
+                         reached=reached, message=message, seconds=seconds,
+                         cpu_seconds=cpu_seconds)
     log.info("kept %d of %d points (%d boundary) from %d tiles (%d run deeper) in %.1f s "
              "(%.0f input points/s): %s", n_out, n, n_boundary, ts.n_tiles, n_deeper,
              seconds["total"], n / seconds["total"] if seconds["total"] else 0.0,

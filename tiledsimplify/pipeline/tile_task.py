@@ -1,8 +1,11 @@
 """What runs for one tile: read core + halo from the store, run the core, write back.
 
-Tasks take the store's path and a tile id — nothing large passes through the scheduler — and
-are plain module-level functions, so threads, processes and dask.distributed workers all run
-them the same way and get the same result.
+Two tasks per tile: :func:`deviation_histogram` (threshold pass) builds the tile's
+neighbourhoods, saves them in the store and returns the histogram of its boundary measure;
+:func:`simplify_tile` restores them (or builds them, if that pass did not run) and runs the
+removal down to the depth it is given. Tasks take the store's path and a tile id — nothing
+large passes through the scheduler — and are plain module-level functions, so threads,
+processes and dask.distributed workers all run them the same way and get the same result.
 """
 
 import time
