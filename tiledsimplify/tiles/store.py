@@ -279,8 +279,10 @@ class _TileBuffer:
         self.written = 0
 
     def add(self, parts: dict[str, np.ndarray]):
+        # copies, not views: a view of a few rows would keep the whole input chunk alive, and
+        # with many tiles holding remainders, memory would grow with the number of chunks
         for k, v in parts.items():
-            self.pieces[k].append(v)
+            self.pieces[k].append(np.array(v, copy=True))
         self.pending += next(iter(parts.values())).shape[0]
 
     def flush(self, aligned: bool) -> tuple[int, list]:
@@ -309,7 +311,7 @@ class _TileBuffer:
             data = np.concatenate(self.pieces[k]) if len(self.pieces[k]) > 1 \
                 else self.pieces[k][0]
             jobs.append((arr, self.written, end, data[:n]))
-            self.pieces[k] = [data[n:]] if n < data.shape[0] else []
+            self.pieces[k] = [data[n:].copy()] if n < data.shape[0] else []
         self.written = end
         self.pending -= n
         return n, jobs
@@ -471,7 +473,7 @@ class TileStore:
         if halo is None:
             halo = HALO_SPACINGS * spacing
         bounds = np.stack([lo, hi])
-        plan = plan_tiles(sample, n, tile_points, bounds=bounds)
+        plan = plan_tiles(sample, n, tile_points, bounds=bounds, halo=halo)
         del sample, sampler
         spec = check.spec or {}
 
