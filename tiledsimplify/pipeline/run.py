@@ -158,8 +158,8 @@ def _tile_line(result, done, total):
 
 
 def _threshold_line(result, done, total):
-    log.debug("tile %d (%d/%d): neighbourhoods and boundary measure in %.1f s",
-              result["tile"], done, total, result["seconds"])
+    log.info("neighbourhoods of tile %d (%d/%d): %d points in %.1f s", result["tile"], done,
+             total, result["n_points"], result["seconds"])
 
 
 def run(input, output, *, ratio=None, count=None, options=None, client=None,

@@ -62,7 +62,7 @@ def deviation_histogram(store_path, tile):
     """Threshold pass for one tile: build and save its neighbourhoods (paper steps 1-2), and
     return the histogram (over :data:`BINS`) of its core points' boundary measure.
 
-    Returns ``{"tile", "hist", "seconds"}``.
+    Returns ``{"tile", "hist", "n_points", "seconds"}`` (``n_points``: core + halo).
     """
     t0 = time.perf_counter()
     store = TileStore.open(store_path)
@@ -72,7 +72,8 @@ def deviation_histogram(store_path, tile):
         state, deviation = neighbourhood_state(xyz, frozen)
         _save_state(store, tile, state, len(xyz))
         hist = np.histogram(np.clip(deviation[:n_core], 0.0, BINS[-1]), bins=BINS)[0]
-    return {"tile": int(tile), "hist": hist, "seconds": time.perf_counter() - t0}
+    return {"tile": int(tile), "hist": hist, "n_points": int(len(xyz)),
+            "seconds": time.perf_counter() - t0}
 
 
 def threshold_from_histogram(hist, k, floor):
