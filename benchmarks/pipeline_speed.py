@@ -2,17 +2,23 @@
 
 The scan is made by the project's own line scanner: Fandisk scaled to 1 m, several views,
 noise 0.1 x spacing, quantised to 0.1 mm in a LAS 1.2 point format 0 file. Each run is its own
-process (peak RSS from the OS). Workers 1 and 2 on the local threaded scheduler.
+process (peak RSS from the OS; CPU s = user + system time of that process, which other load on
+the machine inflates less than wall time). Workers 1 and 2 on the local threaded scheduler.
+The run's log (one line per tile) and the RSS every minute go to stderr, so a run stopped
+part-way still shows its rate.
 
     python benchmarks/pipeline_speed.py 200000 1000000
     python benchmarks/pipeline_speed.py --workers 2 --tile-points 150000 10000000
+    python benchmarks/pipeline_speed.py --floor 0.25 1000000
 """
 
 import json
+import logging
 import resource
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -41,18 +47,39 @@ def make_laz(n, path):
     return len(P)
 
 
-def one(path, workers, tile_points):
+def _rss_mb():
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def _watch_memory(t0, every=60.0):
+    while True:
+        time.sleep(every)
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        print(f"[{time.perf_counter() - t0:7.0f} s] RSS {_rss_mb():.0f} MB, peak {peak:.0f} MB",
+              file=sys.stderr, flush=True)
+
+
+def one(path, workers, tile_points, floor):
     from tiledsimplify.pipeline import run
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(message)s")
     out = Path(path).with_name(f"out_{workers}.laz")
     t = time.perf_counter()
-    s = run(path, out, ratio=0.2, workers=workers, tile_points=tile_points)
+    threading.Thread(target=_watch_memory, args=(t,), daemon=True).start()
+    s = run(path, out, ratio=0.2, workers=workers, tile_points=tile_points, floor=floor)
     wall = time.perf_counter() - t
+    ru = resource.getrusage(resource.RUSAGE_SELF)
     return {"n": s.n_input, "workers": workers, "wall": wall, "tiles": s.n_tiles,
-            "seconds": s.seconds, "reached": s.reached, "kept": s.n_output,
-            "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+            "deeper": s.n_deeper, "seconds": s.seconds, "reached": s.reached,
+            "kept": s.n_output, "cpu": ru.ru_utime + ru.ru_stime, "cpu_seconds": s.cpu_seconds,
+            "rss_mb": ru.ru_maxrss / 1024}
 
 
-def main(sizes, workers=(1, 2), tile_points=None):
+def main(sizes, workers=(1, 2), tile_points=None, floor=0.5):
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:
@@ -60,33 +87,38 @@ def main(sizes, workers=(1, 2), tile_points=None):
             n_real = make_laz(n, path)
             for w in workers:
                 out = subprocess.run([sys.executable, __file__, "--one", str(path), str(w),
-                                      str(tile_points or max(50_000, n_real // 8))],
-                                     check=True,
-                                     capture_output=True, text=True).stdout
+                                      str(tile_points or max(50_000, n_real // 8)), str(floor)],
+                                     check=True, stdout=subprocess.PIPE, text=True).stdout
                 rows.append(json.loads(out.strip().splitlines()[-1]))
-    print("| points | workers | tiles | wall s | input pts/s | speed-up | ingest s | threshold s "
-          "| tiles s | output s | peak RSS MB |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    load = " ".join(Path("/proc/loadavg").read_text().split()[:3])
+    print(f"floor {floor}; load average at the end {load}")
+    print("| points | workers | tiles | wall s | input pts/s | speed-up | ingest s | neighbours s "
+          "| tiles s | deeper s (tiles) | output s | CPU s | peak RSS MB |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     base = {}
     for r in rows:
         base.setdefault(r["n"], r["wall"])
         sec = r["seconds"]
         print(f"| {r['n']:,} | {r['workers']} | {r['tiles']} | {r['wall']:.1f} "
               f"| {r['n'] / r['wall']:,.0f} | {base[r['n']] / r['wall']:.2f}x "
-              f"| {sec['ingest']:.1f} | {sec['threshold']:.1f} | {sec['tiles']:.1f} "
-              f"| {sec['output']:.1f} | {r['rss_mb']:.0f} |")
+              f"| {sec['ingest']:.1f} | {sec['neighbours']:.1f} | {sec['tiles']:.1f} "
+              f"| {sec['deeper']:.1f} ({r['deeper']}) | {sec['output']:.1f} | {r['cpu']:.0f} "
+              f"| {r['rss_mb']:.0f} |")
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 5 and sys.argv[1] == "--one":
-        print(json.dumps(one(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))))
+    if len(sys.argv) == 6 and sys.argv[1] == "--one":
+        print(json.dumps(one(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]),
+                             float(sys.argv[5]))))
     else:
         args = sys.argv[1:]
-        workers, tile_points = (1, 2), None
-        while args[:1] in (["--workers"], ["--tile-points"]):
+        workers, tile_points, floor = (1, 2), None, 0.5
+        while args[:1] in (["--workers"], ["--tile-points"], ["--floor"]):
             if args[0] == "--workers":
                 workers = (int(args[1]),)
-            else:
+            elif args[0] == "--tile-points":
                 tile_points = int(args[1])
+            else:
+                floor = float(args[1])
             args = args[2:]
-        main([int(a) for a in args] or [200_000, 1_000_000], workers, tile_points)
+        main([int(a) for a in args] or [200_000, 1_000_000], workers, tile_points, floor)

@@ -10,8 +10,9 @@ from tiledsimplify.cli import EXIT_OK, main
 from tiledsimplify.core import edge_fit
 from tiledsimplify.io import read_points
 from tiledsimplify.pipeline import run
-from tiledsimplify.pipeline.budget import global_cut, kept_mask, store_cut
+from tiledsimplify.pipeline.budget import deeper_tiles, global_cut, kept_mask, store_cut
 from tiledsimplify.pipeline.tile_task import BINS, threshold_from_histogram
+from tiledsimplify.pipeline.tile_task import _tile_cloud as tile_cloud
 from tiledsimplify.tiles import TileStore
 
 
@@ -31,6 +32,31 @@ def test_global_cut_is_exact_and_prefers_flat_tiles():
     assert sum(cut.values()) == 120
     assert cut[0] == 100 and cut[2] == 1 and cut[1] == 19
     assert sum(global_cut({0: flat}, 1000).values()) == 100
+
+
+def test_deeper_tiles_names_the_tiles_that_stop_short_of_the_cut():
+    rng = np.random.default_rng(1)
+    full = {t: np.sort(rng.random(50)) * (t + 1) for t in range(4)}
+    full[4] = np.r_[np.zeros(30), np.linspace(0, 1, 20)]  # ties at level 0 with tile 5
+    full[5] = np.zeros(40)
+    for n_remove in (0, 10, 35, 60, 100, 150, 230, 290, 331):
+        want = global_cut(full, n_remove)
+        for known in (5, 20, 45):
+            seqs = {t: f[:known] for t, f in full.items()}
+            done = {t: len(f) <= known for t, f in full.items()}
+            need = deeper_tiles(seqs, n_remove, done)
+            if not need:  # the cut over the known prefixes is the cut over the full sequences
+                assert global_cut(seqs, n_remove) == want
+                continue
+            # run the named tiles past their level (as the pipeline does): then it is exact
+            deeper = dict(seqs)
+            for t, level in need.items():
+                runmax = np.maximum.accumulate(full[t])
+                k = int(np.searchsorted(runmax, level, side="right")) + 1
+                deeper[t] = full[t][:k]
+                done[t] = k >= len(full[t])
+            assert not deeper_tiles(deeper, n_remove, done)
+            assert global_cut(deeper, n_remove) == want
 
 
 def test_threshold_from_histogram_matches_exact_rule():
@@ -85,6 +111,59 @@ def test_paper_mode_tiles_share_the_untiled_automatic_threshold(bunny, tmp_path)
     assert s.threshold == pytest.approx(untiled.threshold, rel=0.01)
 
 
+def test_flat_tile_runs_deeper_than_its_floor_and_the_cut_stays_exact(tmp_path):
+    # half the cloud nearly flat, half bumpy: the global cut takes far more than the floor
+    # allows from the flat tiles, which must run again, deeper
+    rng = np.random.default_rng(5)
+    xy = rng.random((6000, 2)) * [4.0, 1.0]
+    z = np.where(xy[:, 0] < 2.0, 1e-4 * rng.standard_normal(len(xy)),
+                 0.15 * np.sin(6 * xy[:, 0]) * np.cos(6 * xy[:, 1]))
+    X = np.c_[xy, z]
+    path = tmp_path / "in.npy"
+    np.save(path, X)
+    store = tmp_path / "store"
+    s = run(path, tmp_path / "out.npy", ratio=0.2, tile_points=1000, floor=0.5, store=store,
+            workers=2, options={"mode": "paper"})
+    assert s.reached and s.n_deeper >= 1
+    t = np.load(tmp_path / "out.npy")
+    assert len(t) == s.target == 1200
+    # the cut over every tile run to the end of its sequence, with the same threshold
+    ts = TileStore.open(store)
+    full, floor_steps = {}, {}
+    for i in range(ts.n_tiles):
+        xyz, frozen, n_core = tile_cloud(ts, i)
+        res = simplify_points(xyz, count=len(xyz), frozen=frozen,
+                              options={"boundary_threshold": s.threshold, "mode": "paper"})
+        full[i] = res.order_importance
+        floor_steps[i] = n_core - int(np.ceil(0.5 * 0.2 * n_core))
+        # what the pipeline stored is a prefix of that sequence
+        known = ts.read_result(i, "step") >= 0
+        np.testing.assert_array_equal(np.sort(ts.read_result(i, "step")[known]),
+                                      np.arange(known.sum()))
+        order = np.argsort(ts.read_result(i, "step")[known])
+        np.testing.assert_array_equal(np.flatnonzero(known)[order], res.order[:known.sum()])
+    cut = global_cut(full, len(X) - s.target)
+    assert any(cut[i] > floor_steps[i] for i in cut)  # some tile had to go past its floor
+    keep = kept_mask(ts, cut)
+    kept = np.stack([t["x"], t["y"], t["z"]], 1)
+    np.testing.assert_array_equal(X[keep], kept)
+
+
+def test_coverage_mode_floor_changes_the_time_never_the_output(tmp_path):
+    # mode "coverage" simplifies the halo with the core; tiles stopped at the target share
+    # (floor 0.99) must be run deeper by the global cut and give the bytes of a deep first pass
+    rng = np.random.default_rng(6)
+    xy = rng.random((5000, 2)) * [4.0, 1.0]
+    X = np.c_[xy, np.where(xy[:, 0] < 2.0, 0.0, 0.1 * np.sin(5 * xy[:, 0]))]
+    path = tmp_path / "in.npy"
+    np.save(path, X)
+    a = run(path, tmp_path / "a.npy", ratio=0.2, tile_points=900, floor=0.99)
+    b = run(path, tmp_path / "b.npy", ratio=0.2, tile_points=900, floor=0.05)
+    assert a.reached and b.reached and a.n_tiles >= 4
+    assert a.n_deeper >= 1
+    assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
+
+
 @pytest.fixture(scope="module")
 def cluster():
     distributed = pytest.importorskip("distributed")
@@ -93,7 +172,7 @@ def cluster():
         yield client
 
 
-def test_same_output_for_every_scheduler(bunny, tmp_path, cluster):
+def test_same_output_for_every_scheduler(bunny, tmp_path, cluster, caplog):
     X, path = bunny
     outs = {}
     for name, kw in [("threads", {"scheduler": "threads", "workers": 2}),
@@ -101,8 +180,15 @@ def test_same_output_for_every_scheduler(bunny, tmp_path, cluster):
                      ("processes", {"scheduler": "processes", "workers": 2}),
                      ("cluster", {"client": cluster})]:
         out = tmp_path / f"{name}.npy"
-        run(path, out, ratio=0.15, tile_points=1500, **kw)
+        caplog.clear()
+        with caplog.at_level("INFO", logger="tiledsimplify"):
+            s = run(path, out, ratio=0.15, tile_points=1500, **kw)
         outs[name] = out.read_bytes()
+        # one log line per finished tile, in this process whatever runs the tiles; a summary
+        lines = [r.getMessage() for r in caplog.records]
+        tiles = [m for m in lines if m.startswith("tile ")]
+        assert len(tiles) == s.n_tiles + s.n_deeper, (name, lines)
+        assert lines[-1].startswith(f"kept {s.n_output} of {s.n_input} points"), lines[-1]
     assert len(set(outs.values())) == 1
 
 
@@ -150,14 +236,16 @@ def test_las_end_to_end_keeps_every_dimension(data_dir, tmp_path):
 def test_cli_run_with_config(bunny, tmp_path):
     X, path = bunny
     cfg = tmp_path / "c.toml"
-    cfg.write_text("[run]\nratio = 0.3\ntile_points = 2000\n[simplify]\nmode = 'paper'\n")
+    cfg.write_text("[run]\nratio = 0.3\ntile_points = 2000\nfloor = 0.3\n"
+                   "[simplify]\nmode = 'paper'\n")
     out = tmp_path / "o.npy"
     assert main(["run", str(path), str(out), "--config", str(cfg), "--no-progress", "-q"]) \
         == EXIT_OK
     assert len(np.load(out)) == round(0.3 * len(X))
     assert main(["run", str(path), str(out), "--count", "4000", "--no-progress", "-q",
-                 "--tile-points", "3000"]) == EXIT_OK
+                 "--tile-points", "3000", "--floor", "0.9"]) == EXIT_OK
     assert len(np.load(out)) == 4000
+    assert main(["run", str(path), str(out), "--count", "4000", "-q", "--floor", "1.5"]) == 2
     bad = tmp_path / "bad.toml"
     bad.write_text("[runn]\nratio = 0.3\n")
     assert main(["run", str(path), str(out), "--config", str(bad), "-q"]) == 2

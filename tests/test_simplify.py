@@ -62,6 +62,52 @@ def test_not_progressive_gives_the_same_kept_set(res_surface):
         short.keep_at(0.05)
 
 
+@pytest.mark.parametrize("quantile", [0.0, 0.3, 0.8])
+def test_progressive_until_is_a_prefix_that_covers_the_level(res_surface, quantile):
+    X, res = res_surface  # res: run to the end
+    runmax = np.maximum.accumulate(res.order_importance)
+    level = float(np.quantile(res.order_importance, quantile))
+    past_level = min(int(np.searchsorted(runmax, level, side="right")) + 1, res.order.size)
+    for kw, to_target in (({"count": len(X)}, 0), ({"count": len(X) // 2}, len(X) // 2)):
+        part = simplify_points(X, **kw, options=SimplifyOptions(progressive_until=level))
+        k = part.order.size
+        # the same sequence, cut right after the first removal above the level (the target
+        # is reached whatever the level)
+        np.testing.assert_array_equal(part.order, res.order[:k])
+        np.testing.assert_array_equal(part.order_importance, res.order_importance[:k])
+        assert k == max(to_target, past_level) < res.order.size
+        assert part.reached
+
+
+def test_saved_neighbourhood_state_gives_the_same_run():
+    from tiledsimplify.core.simplify import Neighbourhoods, neighbourhood_state
+    X = _surface(2000, seed=3)
+    X = np.r_[X, X[:20]]  # duplicates: the state is over the distinct points
+    frozen = X[:, 0] > 3.0
+    paper = SimplifyOptions(mode="paper")  # the state's deviation is the paper's measure
+    fresh = simplify_points(X, count=len(X), frozen=frozen, options=paper)
+    state, deviation = neighbourhood_state(X, frozen)
+    np.testing.assert_array_equal(deviation, fresh.deviation)
+    arrays, how = state.to_arrays()
+    back = Neighbourhoods.from_arrays(arrays, how)
+    for name in ("start", "cnt", "cap", "pool", "meta", "dn", "dn_cnt", "plane_normals",
+                 "normals", "initial_normals"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(state, name), err_msg=name)
+    again = simplify_points(X, count=len(X), frozen=frozen, state=back, options=paper)
+    np.testing.assert_array_equal(again.order, fresh.order)
+    np.testing.assert_array_equal(again.order_importance, fresh.order_importance)
+    np.testing.assert_array_equal(again.normals, fresh.normals)
+    # and in the default mode
+    fresh = simplify_points(X, count=len(X), frozen=frozen)
+    again = simplify_points(X, count=len(X), frozen=frozen, state=neighbourhood_state(X, frozen)[0])
+    np.testing.assert_array_equal(again.order, fresh.order)
+    np.testing.assert_array_equal(again.boundary, fresh.boundary)
+    with pytest.raises(InputError, match="neighbourhood_state on the same points"):
+        simplify_points(X[:-30], count=10, state=neighbourhood_state(X)[0])
+    with pytest.raises(InputError, match="progressive_until"):
+        SimplifyOptions(progressive_until=float("nan"))
+
+
 def test_frozen_points_are_kept_and_still_neighbours():
     X = _surface(2000, seed=1)
     frozen = X[:, 0] < 1.0

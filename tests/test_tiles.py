@@ -150,6 +150,40 @@ def test_plan_from_subsample_stays_under_tile_points():
     assert plain.n_tiles <= plan.n_tiles
 
 
+def test_plan_does_not_cut_through_a_flat_face():
+    # a scanned floor, and a wall across x at the floor's median: a median cut runs through
+    # the wall, so each tile's halo would hold half of it
+    rng = np.random.default_rng(2)
+    floor = np.c_[rng.random(40_000), 0.6 * rng.random(40_000), np.zeros(40_000)]
+    wall = np.c_[0.5 + 1e-4 * rng.standard_normal(4000), 0.6 * rng.random(4000),
+                 0.3 * rng.random(4000)]
+    xyz = np.r_[floor, wall]
+    halo = 0.01
+    median_cut = plan_tiles(xyz, len(xyz), 30_000)
+    plan = plan_tiles(xyz, len(xyz), 30_000, halo=halo)
+    assert median_cut.n_tiles == plan.n_tiles == 2
+    assert (median_cut.face_distance(wall) < halo).mean() > 0.3
+    assert (plan.face_distance(wall) >= halo).all()
+    counts = np.bincount(plan.assign(xyz))
+    assert counts.min() >= 0.4 * len(xyz) - 1  # still balanced within the 40-60 % window
+    with pytest.raises(InputError):
+        plan_tiles(xyz, len(xyz), 30_000, halo=-1.0)
+
+
+def test_ingest_buffers_do_not_keep_input_chunks_alive():
+    # a buffered remainder must not be a view of the whole input chunk: with many tiles
+    # holding remainders, ingest memory grew with the number of chunks (measured at 10M)
+    from tiledsimplify.tiles.store import _TileBuffer
+    chunk = np.arange(3000.0).reshape(1000, 3)
+    buf = _TileBuffer({"xyz": None}, chunk_rows=64)
+    buf.add({"xyz": chunk[10:110]})
+    assert not np.shares_memory(buf.pieces["xyz"][0], chunk)
+    buf.arrays = {"xyz": object()}
+    n, jobs = buf.flush(aligned=True)
+    assert n == 64 and not np.shares_memory(buf.pieces["xyz"][0], jobs[0][3])
+    np.testing.assert_array_equal(buf.pieces["xyz"][0], chunk[74:110])
+
+
 def test_plan_deterministic_and_serialisable():
     xyz = clustered(30_000)
     a = plan_tiles(xyz, 10 * len(xyz), 20_000, bounds=[xyz.min(0), xyz.max(0)])

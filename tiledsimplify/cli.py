@@ -63,8 +63,9 @@ def _parser():
     g = r.add_mutually_exclusive_group()
     g.add_argument("--ratio", type=float, help="fraction of points to keep, in (0, 1]")
     g.add_argument("--count", type=int, help="number of points to keep")
-    r.add_argument("--config", help="TOML file: [run] ratio/count/tile_points/halo/scheduler/"
-                                    "workers, [simplify] core options (see configs/)")
+    r.add_argument("--config", help="TOML file: [run] ratio/count/tile_points/halo/floor/"
+                                    "scheduler/workers, [simplify] core options (see "
+                                    "configs/)")
     r.add_argument("--scheduler", default=None,
                    help="threads (default), processes, synchronous, or tcp://HOST:PORT")
     r.add_argument("--workers", type=int, default=None, help="local workers")
@@ -75,6 +76,10 @@ def _parser():
                    help="halo width in model units (default: 10 x estimated spacing)")
     r.add_argument("--mode", choices=MODES, default=None,
                    help="coverage (default) or paper; overrides [simplify] mode")
+    r.add_argument("--floor", type=float, default=None,
+                   help="each tile first runs down to this fraction of the target ratio "
+                        "(0.5); tiles the global cut needs deeper run again. Changes the "
+                        "time, never the output")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
 
@@ -169,7 +174,7 @@ def _load_config(path):
 def _run(args):
     from .pipeline import run
     run_cfg, simplify_cfg = _load_config(args.config) if args.config else ({}, {})
-    known = {"ratio", "count", "scheduler", "workers", "tile_points", "halo"}
+    known = {"ratio", "count", "scheduler", "workers", "tile_points", "halo", "floor"}
     unknown = sorted(set(run_cfg) - known)
     if unknown:
         raise TiledSimplifyError(f"{args.config}: unknown [run] key(s) {unknown}; known: "
@@ -187,7 +192,8 @@ def _run(args):
                   count=run_cfg.get("count"), options=SimplifyOptions.from_mapping(simplify_cfg),
                   scheduler=run_cfg.get("scheduler", "threads"), workers=run_cfg.get("workers"),
                   store=args.store, tile_points=run_cfg.get("tile_points", 500_000),
-                  halo=run_cfg.get("halo"), progress=not (args.no_progress or args.quiet))
+                  halo=run_cfg.get("halo"), floor=run_cfg.get("floor", 0.5),
+                  progress=not (args.no_progress or args.quiet))
     return EXIT_OK if summary.reached else EXIT_BUDGET
 
 

@@ -32,6 +32,32 @@ def from_edges(n, edges, slack=8):
     return start, cnt, cap, pool, meta
 
 
+def from_lists(cnt, flat, slack=8):
+    """Build ``(start, cnt, cap, pool, meta)`` from the lists laid end to end: point ``i``'s
+    neighbours are the next ``cnt[i]`` entries of ``flat``, in that order. The layout is the
+    one :func:`from_edges` makes (same capacities and pool size), so lists saved as
+    ``(cnt, flat)`` come back exactly as they were built."""
+    cnt = np.asarray(cnt, dtype=np.int64)
+    n = cnt.size
+    cap = cnt + slack
+    start = np.zeros(n, dtype=np.int64)
+    np.cumsum(cap[:-1], out=start[1:])
+    used = int(cap.sum())
+    pool = np.full(max(2 * used, 16), -1, dtype=np.int32)
+    first = np.zeros(n, dtype=np.int64)
+    np.cumsum(cnt[:-1], out=first[1:])
+    pool[np.repeat(start - first, cnt) + np.arange(int(cnt.sum()))] = flat
+    meta = np.array([used], dtype=np.int64)
+    return start, cnt, cap, pool, meta
+
+
+def to_flat(start, cnt, pool):
+    """The lists laid end to end (the inverse of :func:`from_lists`), as int32."""
+    first = np.zeros(cnt.size, dtype=np.int64)
+    np.cumsum(cnt[:-1], out=first[1:])
+    return pool[np.repeat(start - first, cnt) + np.arange(int(cnt.sum()))].astype(np.int32)
+
+
 def to_sets(start, cnt, pool, alive=None):
     """Neighbour lists as a list of Python sets (for tests and debugging)."""
     n = start.size

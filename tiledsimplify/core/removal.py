@@ -66,7 +66,7 @@ def _max_count(cnt, items, k):
 @jit
 def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
                   boundary, removable, importance, tie, code, weight, guard, guard_value, n_steps,
-                  half, tol):
+                  half, tol, stop_above=math.inf):
     """Remove up to ``n_steps`` points, least important first.
 
     Mutates the neighbour lists, local meshes, normals and importance in place (for the
@@ -74,6 +74,9 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     ``tie`` (uint64) breaks importance ties (see :mod:`.heap`); ``code`` and ``weight`` select the
     importance measure (:func:`.importance.importance_of`). ``guard`` / ``guard_value``
     select a guard rule (:data:`GUARDS`) that can veto a removal; a vetoed point is kept.
+    The loop also stops right after a removal whose importance exceeds ``stop_above``: the
+    recorded sequence then holds every step whose running maximum of importance at removal is
+    at most ``stop_above`` (the prefix does not depend on where the loop stops).
 
     Returns
     -------
@@ -187,4 +190,6 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
             mesh_changed[link[j]] = False
             normal_changed[link[j]] = False
         step += 1
+        if at[step - 1] > stop_above:
+            break  # every later step has a running maximum above stop_above
     return order[:step], at[:step], pool

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import BudgetWarning, InputError
+from . import adjacency
 from . import boundary as boundary_mod
 from . import edge_fit
 from .heap import coordinate_hash
@@ -65,7 +66,12 @@ def _deduplicate(X, frozen):
 
 @dataclass
 class Neighbourhoods:
-    """Voronoi neighbours (adjacency lists), local meshes and normals of one point set."""
+    """Voronoi neighbours (adjacency lists), local meshes and normals of one point set.
+
+    Built by :func:`neighbourhoods`; the removal mutates it in place. :meth:`to_arrays` and
+    :meth:`from_arrays` save and restore a freshly built one exactly (to share it between
+    the passes of a tiled run, see :func:`neighbourhood_state`).
+    """
 
     start: np.ndarray
     cnt: np.ndarray
@@ -78,6 +84,33 @@ class Neighbourhoods:
     normals: np.ndarray
     initial_normals: np.ndarray
     how: str
+
+    def to_arrays(self):
+        """Compact arrays of a freshly built state: ``(arrays, how)``.
+
+        Lists lose their spare capacity and ids become int32 (~130 bytes per point);
+        :meth:`from_arrays` rebuilds the identical state, so a run from it gives the same
+        result bit for bit.
+        """
+        used = np.arange(MAX_DN) < self.dn_cnt[:, None]
+        return {"vn_count": self.cnt.astype(np.int32),
+                "vn": adjacency.to_flat(self.start, self.cnt, self.pool),
+                "dn_count": self.dn_cnt.astype(np.int8),
+                "dn": self.dn[used].astype(np.int32),
+                "plane_normals": self.plane_normals,
+                "normals": self.normals}, self.how
+
+    @classmethod
+    def from_arrays(cls, arrays, how):
+        """The state saved by :meth:`to_arrays`."""
+        start, cnt, cap, pool, meta = adjacency.from_lists(arrays["vn_count"], arrays["vn"])
+        dn_cnt = np.asarray(arrays["dn_count"], dtype=np.int64)
+        dn = np.zeros((dn_cnt.size, MAX_DN), dtype=np.int64)
+        dn[np.arange(MAX_DN) < dn_cnt[:, None]] = arrays["dn"]
+        normals = np.ascontiguousarray(arrays["normals"], dtype=np.float64)
+        return cls(start, cnt, cap, pool, meta, dn, dn_cnt,
+                   np.ascontiguousarray(arrays["plane_normals"], dtype=np.float64), normals,
+                   normals.copy(), str(how))
 
 
 def neighbourhoods(Xu, scale):
@@ -133,7 +166,48 @@ def boundary_flags(Xu, st, options):
     return deviation, distance <= options.edge_width, threshold
 
 
-def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
+def _prepare(X, frozen):
+    """Distinct points, centred: ``(rep, inverse, Xu, D)`` — the representatives of the
+    duplicate groups, the group of every input point, their centred coordinates (what every
+    step runs on) and the cloud's scale."""
+    n = X.shape[0]
+    rep, inverse = _deduplicate(X, frozen) if n else (np.empty(0, np.int64), np.empty(0, np.int64))
+    m = rep.size
+    lo = X[rep].min(axis=0) if m else np.zeros(3)
+    hi = X[rep].max(axis=0) if m else np.zeros(3)
+    Xu = np.ascontiguousarray(X[rep] - 0.5 * (lo + hi))
+    return rep, inverse, Xu, scale_of(Xu)
+
+
+def neighbourhood_state(xyz, frozen=None):
+    """Paper steps 1-2 (``VN_p``, ``DN_p``, normals) and the boundary measure, once.
+
+    For callers that need the boundary measure of many point sets before they can simplify
+    any of them — a tiled run takes one threshold over all tiles. Pass the state to
+    ``simplify_points(xyz, ..., frozen=frozen, state=state)`` on the same points and the
+    neighbourhood stage (Qhull and the local meshes, most of the cost before removal) is not
+    computed twice. The result is identical to a run without ``state``.
+
+    Parameters
+    ----------
+    xyz, frozen : as for :func:`simplify_points`.
+
+    Returns
+    -------
+    state : Neighbourhoods
+        Over the distinct points; :meth:`Neighbourhoods.to_arrays` saves it compactly.
+    deviation : float64 (n,)
+        The boundary measure of every input point (:mod:`.boundary`).
+    """
+    X, frozen = _validate(xyz, frozen)
+    _, inverse, Xu, D = _prepare(X, frozen)
+    st = neighbourhoods(Xu, D)
+    deviation_u = np.zeros(Xu.shape[0])
+    boundary_mod.all_deviations(Xu, st.normals, st.dn, st.dn_cnt, deviation_u)
+    return st, deviation_u[inverse]
+
+
+def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, state=None):
     """Simplify a point cloud, keeping (and flagging) every point on or near a sharp edge.
 
     Parameters
@@ -151,6 +225,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
         Points that are never removed but act as neighbours (a tile's halo).
     options : SimplifyOptions or dict, optional
         Algorithm options; mode "coverage" by default (``mode="paper"``: as published).
+    state : Neighbourhoods, optional
+        From :func:`neighbourhood_state` on the same ``xyz`` and ``frozen`` (or restored with
+        :meth:`Neighbourhoods.from_arrays`): skips steps 1-2. It is consumed (the removal
+        updates it in place).
 
     Returns
     -------
@@ -199,16 +277,19 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
         stats[f"seconds_{name}"] = now - clock
         clock = now
 
-    rep, inverse = _deduplicate(X, frozen) if n else (np.empty(0, np.int64), np.empty(0, np.int64))
+    rep, inverse, Xu, D = _prepare(X, frozen)
     m = rep.size
     stats["n_duplicates"] = n - m
-    lo = X[rep].min(axis=0) if m else np.zeros(3)
-    hi = X[rep].max(axis=0) if m else np.zeros(3)
-    Xu = np.ascontiguousarray(X[rep] - 0.5 * (lo + hi))
-    D = scale_of(Xu)
     lap("prepare")
 
-    st = neighbourhoods(Xu, D)
+    if state is None:
+        st = neighbourhoods(Xu, D)
+    elif state.cnt.size != m:
+        raise InputError(f"state was built for {state.cnt.size} distinct points, but these "
+                         f"points have {m}; build it with neighbourhood_state on the same "
+                         "points and frozen mask.")
+    else:
+        st = state
     stats["neighbours"] = st.how
     stats["mean_voronoi_degree"] = float(st.cnt.mean()) if m else 0.0
     stats["mean_local_mesh_degree"] = float(st.dn_cnt.mean()) if m else 0.0
@@ -232,12 +313,28 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None):
     dup_order = np.flatnonzero(~is_rep & ~frozen & ~boundary)
     removable_u = ~boundary_u & ~frozen[rep]
     n_remove = n - target
-    steps = int(removable_u.sum()) if options.progressive else max(0, n_remove - dup_order.size)
-    order_u, at_u, st.pool = remove_points(
-        Xu, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, boundary_u, removable_u.copy(), imp_u, coordinate_hash(X[rep]), code, weight,
-        GUARDS[options.guard], float(options.max_spacing or 0.0), steps, BOX_FACTOR * D,
-        TOL_FACTOR * D)
+    to_target = max(0, n_remove - dup_order.size)
+    alive = removable_u.copy()
+    tie = coordinate_hash(X[rep])
+
+    def remove(n_steps, stop_above):
+        order_k, at_k, st.pool = remove_points(
+            Xu, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
+            st.normals, boundary_u, alive, imp_u, tie, code, weight, GUARDS[options.guard],
+            float(options.max_spacing or 0.0), n_steps, BOX_FACTOR * D, TOL_FACTOR * D,
+            stop_above)
+        return order_k, at_k
+
+    if not options.progressive:
+        order_u, at_u = remove(to_target, np.inf)
+    elif options.progressive_until is None:
+        order_u, at_u = remove(m, np.inf)
+    else:  # to the target, then on until the level is passed (the sequence is the same)
+        level = float(options.progressive_until)
+        order_u, at_u = remove(to_target, np.inf)
+        if not (at_u.size and at_u.max() > level):
+            o2, a2 = remove(m, level)
+            order_u, at_u = np.concatenate([order_u, o2]), np.concatenate([at_u, a2])
     lap("removal")
 
     order = np.concatenate([dup_order, rep[order_u]])

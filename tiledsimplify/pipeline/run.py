@@ -1,7 +1,8 @@
 """``run``: the tiled pipeline, from input file(s) to one simplified output.
 
-    input → tile store (zarr: count-balanced tiles, halos) → global boundary threshold →
-    per-tile simplification with the halo frozen (dask) → one global budget → output
+    input → tile store (zarr: count-balanced tiles, halos) → neighbourhoods of every tile and
+    one global boundary threshold → per-tile simplification with the halo frozen, down to a
+    floor (dask) → one global budget (tiles it reaches past their floor run deeper) → output
 
 Stages are resumable: an existing, complete store for the same input and settings is reused,
 finished tiles are not recomputed, and the output is rewritten from the stored results.
@@ -10,6 +11,8 @@ finished tiles are not recomputed, and the output is rewritten from the stored r
 import hashlib
 import json
 import logging
+import math
+import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
@@ -17,15 +20,16 @@ from pathlib import Path
 
 import dask
 import numpy as np
+from dask.callbacks import Callback
 
 from .. import __version__
 from ..core import SimplifyOptions, edge_fit
 from ..core.result import resolve_target
-from ..errors import InputError
+from ..errors import InputError, TiledSimplifyError
 from ..io.points_out import write_points
 from ..io.sources import open_source
 from ..tiles import TileStore
-from .budget import kept_in_tile, store_cut
+from .budget import deeper_tiles, global_cut, kept_in_tile, store_sequences
 from .tile_task import deviation_histogram, simplify_tile, threshold_from_histogram
 
 log = logging.getLogger("tiledsimplify")
@@ -35,8 +39,12 @@ SCHEDULERS = ("threads", "processes", "synchronous")
 
 @dataclass
 class RunSummary:
-    """What a run did: counts, the boundary threshold and point spacing used, seconds per
-    stage."""
+    """What a run did: counts, the boundary threshold and point spacing used, tiles run
+    deeper, seconds per stage.
+
+    ``seconds``: wall time per stage and ``total``; ``cpu_seconds``: CPU time of this process
+    per stage (all its threads; not the work of other processes or cluster workers).
+    """
 
     n_input: int
     n_output: int
@@ -45,11 +53,13 @@ class RunSummary:
     n_tiles: int
     threshold: float
     spacing: float
+    n_deeper: int
     store: str
     output: str
     reached: bool
     message: str = ""
     seconds: dict = field(default_factory=dict)
+    cpu_seconds: dict = field(default_factory=dict)
 
     def to_dict(self):
         return asdict(self)
@@ -63,36 +73,100 @@ def _fingerprint(source, settings):
     return h.hexdigest()[:20]
 
 
-def _compute(tasks, scheduler, workers, client, progress):
-    """Run dask delayed ``tasks`` on the chosen scheduler; returns their results in order."""
+class _Progress:
+    """Per-task progress of one stage: a log line per finished tile (from the calling
+    process, so it is not lost in worker processes) and, on a terminal or in a notebook, a bar
+    redrawn below the log lines (not in log files: cron and Airflow logs get the lines only)."""
+
+    def __init__(self, stage, total, describe, bar, out=None):
+        self.stage, self.total, self.describe = stage, total, describe
+        self.out = sys.stderr if out is None else out
+        interactive = "ipykernel" in sys.modules or (
+            hasattr(self.out, "isatty") and self.out.isatty())
+        self.bar = bool(bar) and interactive
+        self.done = 0
+        self.t0 = time.perf_counter()
+
+    def __call__(self, result):
+        self.done += 1
+        if self.bar:
+            self.out.write("\r\033[K")
+        if self.describe is not None:
+            self.describe(result, self.done, self.total)
+        if self.bar:
+            self.draw()
+
+    def draw(self):
+        frac = self.done / self.total if self.total else 1.0
+        elapsed = time.perf_counter() - self.t0
+        left = elapsed * (1 - frac) / frac if frac else float("nan")
+        width = 30
+        fill = int(round(width * frac))
+        self.out.write(f"\r{self.stage} [{'#' * fill}{' ' * (width - fill)}] {self.done}/"
+                       f"{self.total} tiles {100 * frac:3.0f}% | {elapsed:.0f} s"
+                       + (f", ~{left:.0f} s left" if 0 < frac < 1 else ""))
+        self.out.flush()
+
+    def close(self):
+        if self.bar:
+            self.out.write("\n")
+            self.out.flush()
+
+
+def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describe=None):
+    """Run dask delayed ``tasks`` on the chosen scheduler; returns their results in order.
+
+    ``describe(result, done, total)`` is called in this process as each task finishes (any
+    scheduler); ``progress`` adds a bar on a terminal.
+    """
     if client is None and isinstance(scheduler, str) and scheduler.startswith("tcp://"):
         from distributed import Client
         with Client(scheduler) as c:
-            return _compute(tasks, None, workers, c, progress)
-    if client is not None:
-        futures = client.compute(tasks)
-        if progress:
-            from distributed import progress as dprogress
-            dprogress(futures)
-        return client.gather(futures)
-    if scheduler not in SCHEDULERS:
-        raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, got "
-                         f"{scheduler!r}.")
-    kw = {"scheduler": scheduler}
-    if workers and scheduler != "synchronous":
-        kw["num_workers"] = int(workers)
-    if progress:
-        import sys
+            return _compute(tasks, None, workers, c, progress, stage, describe)
+    report = _Progress(stage, len(tasks), describe, progress)
+    if report.bar:
+        report.draw()
+    try:
+        if client is not None:
+            from distributed import as_completed
+            futures = client.compute(tasks)
+            for fut in as_completed(futures):
+                report(fut.result())
+            return client.gather(futures)
+        if scheduler not in SCHEDULERS:
+            raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, "
+                             f"got {scheduler!r}.")
+        kw = {"scheduler": scheduler}
+        if workers and scheduler != "synchronous":
+            kw["num_workers"] = int(workers)
+        keys = {t.key for t in tasks}
 
-        from dask.diagnostics import ProgressBar
-        with ProgressBar(out=sys.stderr):
+        def posttask(key, result, dsk, state, worker_id):
+            if key in keys:
+                report(result)
+
+        with Callback(posttask=posttask):
             return list(dask.compute(*tasks, **kw))
-    return list(dask.compute(*tasks, **kw))
+    finally:
+        report.close()
+
+
+def _tile_line(result, done, total):
+    log.info("tile %d (%d/%d): %d core + %d halo points, %d boundary, %d removals%s, %.1f s",
+             result["tile"], done, total, result["n_core"], result["n_halo"],
+             result["n_boundary"], result["steps"],
+             " (all)" if result["exhausted"] else f" (up to level {result['level']:.3g})",
+             result["seconds"])
+
+
+def _threshold_line(result, done, total):
+    log.info("neighbourhoods of tile %d (%d/%d): %d points in %.1f s", result["tile"], done,
+             total, result["n_points"], result["seconds"])
 
 
 def run(input, output, *, ratio=None, count=None, options=None, client=None,
         scheduler="threads", workers=None, store=None, tile_points=500_000, halo=None,
-        chunk_points=1_000_000, progress=False):
+        floor=0.5, chunk_points=1_000_000, progress=False):
     """Simplify a cloud of any size tile by tile and write one output.
 
     Parameters
@@ -121,6 +195,13 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         Points per tile core, at most.
     halo : float, optional
         Halo width in model units; 10 x the estimated point spacing by default.
+    floor : float in (0, 1)
+        How far each tile runs first: until it keeps ``floor`` x the overall kept fraction of
+        its core points (default 0.5: half the target ratio). Tiles the global cut reaches
+        beyond that (flat ones) are run again, deeper, exactly as far as the cut needs; the
+        output does not depend on ``floor``, only the time does. The end of a tile's removal
+        sequence is slow (points around emptied flat faces gain hundreds of Voronoi
+        neighbours), which is why tiles do not simply run to the end.
     chunk_points : int
         Points read per input chunk (bounds ingest memory).
     progress : bool
@@ -131,7 +212,13 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     RunSummary
     """
     t_start = time.perf_counter()
-    seconds = {}
+    seconds, cpu_seconds = {}, {}
+    clock = [time.perf_counter(), time.process_time()]
+
+    def stage(name):  # wall and CPU time of the stage that ends now
+        now = [time.perf_counter(), time.process_time()]
+        seconds[name], cpu_seconds[name] = now[0] - clock[0], now[1] - clock[1]
+        clock[:] = now
     if options is None:
         options = SimplifyOptions()
     elif isinstance(options, dict):
@@ -140,6 +227,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     source = open_source(input, chunk_points=chunk_points)
     n = source.count
     target = resolve_target(n, ratio, count)
+    if not 0.0 < float(floor) < 1.0:
+        raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
+                         f"first runs down to), got {floor!r}; the default is 0.5.")
     if output.suffix.lower() in (".las", ".laz") and not source.is_las:
         raise InputError(f"{output}: LAS/LAZ output needs LAS/LAZ input (it keeps the input's "
                          "point records); write .ply, .npy, .xyz or .csv instead.")
@@ -155,7 +245,6 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     else:
         store_path = Path(store)
     try:
-        t = time.perf_counter()
         ts = None
         if store_path.exists():
             ts = TileStore.open(store_path)
@@ -172,52 +261,78 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 provenance={"input": [str(f) for f in getattr(source, "files", [])],
                             "output": str(output)})
             log.info("ingested %d points into %d tiles (halo %.4g, spacing %.4g) in %.1f s",
-                     n, ts.n_tiles, ts.halo, ts.spacing, time.perf_counter() - t)
-        seconds["ingest"] = time.perf_counter() - t
+                     n, ts.n_tiles, ts.halo, ts.spacing, time.perf_counter() - clock[0])
+        stage("ingest")
 
-        # mode "paper": one global boundary threshold for every tile (mode "coverage" flags
-        # edges by a fixed candidate angle and a local edge fit: nothing global to find)
-        t = time.perf_counter()
+        # mode "paper": neighbourhoods of every tile (saved for the tile pass), one threshold
+        # for all tiles (mode "coverage" flags edges by a fixed candidate angle and a local
+        # edge fit: nothing global to find)
         threshold = options.boundary_threshold
         if threshold is None and options.mode != "paper":
             threshold = edge_fit.CANDIDATE
         if threshold is None:
             threshold = ts.run_attrs.get("threshold")
         if threshold is None and options.detect_boundary and options.mode == "paper":
-            hist = _compute([dask.delayed(deviation_histogram)(str(store_path), i, opts)
-                             for i in range(ts.n_tiles)], scheduler, workers, client, progress)
-            threshold = threshold_from_histogram(np.sum(hist, axis=0), options.boundary_k,
-                                                 options.boundary_floor)
+            done = _compute([dask.delayed(deviation_histogram)(str(store_path), i)
+                             for i in range(ts.n_tiles)], scheduler, workers, client, progress,
+                            "neighbours", _threshold_line)
+            threshold = threshold_from_histogram(np.sum([d["hist"] for d in done], axis=0),
+                                                 options.boundary_k, options.boundary_floor)
             ts.set_run_attrs({"threshold": threshold})
-        seconds["threshold"] = time.perf_counter() - t
+            log.info("boundary threshold %.4g from %d tiles in %.1f s", threshold, ts.n_tiles,
+                     time.perf_counter() - clock[0])
+        stage("neighbours")
 
-        # per tile, halo frozen; one spacing for the coverage measure of every tile
+        # per tile down to the floor; one spacing for the coverage measure of every tile
         spacing = options.spacing
         if spacing is None and ts.spacing > 0:
             spacing = ts.spacing
         if spacing is not None:
             opts = {**opts, "spacing": spacing}
-        t = time.perf_counter()
         pending = ts.pending_tiles()
         thr = threshold if options.detect_boundary else None
+        keep_fraction = float(floor) * target / n if n else 0.0
         if pending:
-            done = _compute([dask.delayed(simplify_tile)(str(store_path), i, opts, thr)
-                             for i in pending], scheduler, workers, client, progress)
-            log.info("simplified %d tiles in %.1f s", len(done), time.perf_counter() - t)
-        seconds["tiles"] = time.perf_counter() - t
+            _compute([dask.delayed(simplify_tile)(
+                str(store_path), i, opts, thr,
+                ("keep", math.ceil(keep_fraction * ts.count(i)))) for i in pending],
+                scheduler, workers, client, progress, "tiles", _tile_line)
+            log.info("simplified %d tiles in %.1f s", len(pending), time.perf_counter() - clock[0])
+        stage("tiles")
 
-        # one global budget, then the output
-        t = time.perf_counter()
-        prefix = store_cut(ts, n - target)
+        # one global budget; tiles it reaches past their floor run deeper (once suffices)
+        n_deeper = 0
+        for _ in range(3):
+            seqs, exhausted, known = store_sequences(ts)
+            need = deeper_tiles(seqs, n - target, exhausted, known)
+            if not need:
+                break
+            seqs = None  # not held while the deeper pass runs
+            n_deeper += len(need)
+            log.info("the global cut reaches past the floor of %d tile(s): running them deeper",
+                     len(need))
+            _compute([dask.delayed(simplify_tile)(str(store_path), i, opts, thr,
+                                                  ("level", need[i])) for i in sorted(need)],
+                     scheduler, workers, client, progress, "deeper", _tile_line)
+        else:
+            raise TiledSimplifyError(
+                f"{store_path}: the tiles' removal sequences do not agree between passes (the "
+                "global cut still needs deeper tiles after three passes); delete the store and "
+                "run again, and report this as a bug if it persists.")
+        stage("deeper")
+        prefix = global_cut(seqs, n - target)
+        del seqs
         n_removed = sum(prefix.values())
-        seconds["budget"] = time.perf_counter() - t
-        t = time.perf_counter()
+        for i in range(ts.n_tiles):  # the saved neighbourhoods are no longer needed
+            ts.delete_state(i)
+        stage("budget")
         n_out, n_boundary = _write_output(ts, source, output, prefix)
-        seconds["output"] = time.perf_counter() - t
+        stage("output")
     finally:
         if tmp is not None:
             tmp.cleanup()
     seconds["total"] = time.perf_counter() - t_start
+    cpu_seconds["total"] = sum(cpu_seconds.values())
     reached = n - n_removed == target
     message = "" if reached else (
         f"asked to keep {target} of {n} points, but boundary points alone number more: kept "
@@ -227,10 +342,13 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     summary = RunSummary(n_input=n, n_output=n_out, target=target, n_boundary=n_boundary,
                          n_tiles=ts.n_tiles, threshold=float(threshold or float("nan")),
                          spacing=float(spacing or float("nan")),
+                         n_deeper=n_deeper,
                          store=str(store_path) if tmp is None else "", output=str(output),
-                         reached=reached, message=message, seconds=seconds)
-    log.info("kept %d of %d points (%d boundary) in %.1f s: %s", n_out, n,
-             n_boundary, seconds["total"],
+                         reached=reached, message=message, seconds=seconds,
+                         cpu_seconds=cpu_seconds)
+    log.info("kept %d of %d points (%d boundary) from %d tiles (%d run deeper) in %.1f s "
+             "(%.0f input points/s): %s", n_out, n, n_boundary, ts.n_tiles, n_deeper,
+             seconds["total"], n / seconds["total"] if seconds["total"] else 0.0,
              ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items() if k != "total"))
     return summary
 

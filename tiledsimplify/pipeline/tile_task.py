@@ -1,19 +1,32 @@
 """What runs for one tile: read core + halo from the store, run the core, write back.
 
-Tasks take the store's path and a tile id — nothing large passes through the scheduler — and
-are plain module-level functions, so threads, processes and dask.distributed workers all run
-them the same way and get the same result.
+Two tasks per tile: :func:`deviation_histogram` (threshold pass) builds the tile's
+neighbourhoods, saves them in the store and returns the histogram of its boundary measure;
+:func:`simplify_tile` restores them (or builds them, if that pass did not run) and runs the
+removal down to the depth it is given. Tasks take the store's path and a tile id — nothing
+large passes through the scheduler — and are plain module-level functions, so threads,
+processes and dask.distributed workers all run them the same way and get the same result.
 """
 
-import logging
 import time
+import warnings
 
 import numpy as np
 
 from ..core import SimplifyOptions, simplify_points
+from ..core.simplify import Neighbourhoods, neighbourhood_state
+from ..errors import BudgetWarning, InputError
 from ..tiles import TileStore
 
-log = logging.getLogger("tiledsimplify")
+
+def _ignore_tile_budget_warnings():
+    """A tile that cannot reach its floor is exhausted, not short of a budget: the global cut
+    says whether the run reaches its count. A filter matching only warnings raised from calls
+    in this module (``catch_warnings`` is not thread-safe), set again by every task because a
+    caller's ``catch_warnings`` may have dropped it."""
+    warnings.filterwarnings("ignore", category=BudgetWarning,
+                            module=__name__.replace(".", r"\."))
+
 
 #: fixed log-spaced bins for the global boundary threshold (deviation is ~ an angle, radians)
 BINS = np.concatenate([[0.0], np.geomspace(1e-7, 4.0, 4095)])
@@ -28,15 +41,39 @@ def _tile_cloud(store, tile):
     return xyz, frozen, len(core_xyz)
 
 
-def deviation_histogram(store_path, tile, options):
-    """Histogram (over :data:`BINS`) of the boundary measure of the tile's core points."""
+def _save_state(store, tile, state, n_points):
+    arrays, how = state.to_arrays()
+    store.write_state(tile, arrays, {"how": how, "n_points": int(n_points)})
+
+
+def _state(store, tile, xyz, frozen):
+    """The tile's neighbourhood state: restored from the store, else built and saved there,
+    so that no later pass over the tile (the tile pass after the threshold pass, a deeper
+    pass) builds it again."""
+    saved = store.read_state(tile)
+    if saved is not None and saved[1].get("n_points") == len(xyz):
+        return Neighbourhoods.from_arrays(saved[0], saved[1]["how"])
+    state, _ = neighbourhood_state(xyz, frozen)
+    _save_state(store, tile, state, len(xyz))
+    return state
+
+
+def deviation_histogram(store_path, tile):
+    """Threshold pass for one tile: build and save its neighbourhoods (paper steps 1-2), and
+    return the histogram (over :data:`BINS`) of its core points' boundary measure.
+
+    Returns ``{"tile", "hist", "n_points", "seconds"}`` (``n_points``: core + halo).
+    """
+    t0 = time.perf_counter()
     store = TileStore.open(store_path)
     xyz, frozen, n_core = _tile_cloud(store, tile)
-    if n_core == 0:
-        return np.zeros(len(BINS) - 1, dtype=np.int64)
-    opts = SimplifyOptions(**{**options, "progressive": False})
-    res = simplify_points(xyz, count=len(xyz), frozen=frozen, options=opts)
-    return np.histogram(np.clip(res.deviation[:n_core], 0.0, BINS[-1]), bins=BINS)[0]
+    hist = np.zeros(len(BINS) - 1, dtype=np.int64)
+    if n_core:
+        state, deviation = neighbourhood_state(xyz, frozen)
+        _save_state(store, tile, state, len(xyz))
+        hist = np.histogram(np.clip(deviation[:n_core], 0.0, BINS[-1]), bins=BINS)[0]
+    return {"tile": int(tile), "hist": hist, "n_points": int(len(xyz)),
+            "seconds": time.perf_counter() - t0}
 
 
 def threshold_from_histogram(hist, k, floor):
@@ -53,7 +90,7 @@ def threshold_from_histogram(hist, k, floor):
     return max(float(med + k * 1.4826 * mad), float(floor))
 
 
-def _halo_frozen(frozen, options):
+def _halo_frozen(frozen, mode):
     """The halo is frozen in mode "paper"; in mode "coverage" it is simplified with the core.
 
     The coverage measure sees the spacing of a point's neighbours. A frozen halo keeps full
@@ -63,16 +100,45 @@ def _halo_frozen(frozen, options):
     discarded; the neighbouring tile owns those points) lets the border see a neighbourhood
     thinned as the untiled run would thin it.
     """
-    return frozen if options.mode == "paper" else None
+    return frozen if mode == "paper" else None
 
 
-def simplify_tile(store_path, tile, options, threshold):
-    """Simplify one tile with its halo frozen; write the core points' results; mark done.
+def simplify_tile(store_path, tile, options, threshold, depth):
+    """Simplify one tile (halo frozen in mode "paper", simplified with the core otherwise, see
+    :func:`_halo_frozen`) down to ``depth``; write the core points' results; mark it done.
 
+    Parameters
+    ----------
+    store_path : str
+    tile : int
+    options : dict
+        :class:`SimplifyOptions` fields (``progressive`` and ``progressive_until`` are set
+        here).
+    threshold : float or None
+        The global boundary threshold.
+    depth : ("keep", k) or ("level", L)
+        How far the tile's removal sequence is run. ``("keep", k)``: until ``k`` core points
+        remain (the first pass; with a simplified halo, until the same share of the whole
+        tile remains). ``("level", L)``: until the running maximum of importance at
+        removal exceeds ``L`` (a deeper pass asked for by the global cut; ``inf`` runs to
+        the end). Either way the recorded sequence is a prefix of the full one.
+
+    Returns
+    -------
+    dict
+        ``tile``, ``n_core``, ``n_halo``, ``n_boundary``, ``steps`` (core removals recorded),
+        ``exhausted`` (every removable point was removed), ``level`` (running maximum at
+        the last recorded removal) and ``seconds``.
+
+    Notes
+    -----
     Results per core point: ``step`` (position among the core points in the tile's removal
-    sequence, -1 if never removed), ``importance`` (at removal, NaN if never removed),
-    ``boundary``, ``normal``.
-    The tile is run progressively to the end, so the global budget can cut it anywhere.
+    sequence, -1 if not reached), ``importance`` (at removal, NaN if not reached; with a
+    simplified halo, the running maximum over the whole tile's sequence at that removal — the
+    level the global cut compares, and a prefix of it is known exactly when the run stops at a
+    level), ``boundary``, ``normal``; the
+    result attributes ``exhausted``, ``steps`` and ``depth`` tell the global cut how far the
+    sequence is known.
     """
     t0 = time.perf_counter()
     store = TileStore.open(store_path)
@@ -81,20 +147,50 @@ def simplify_tile(store_path, tile, options, threshold):
     imp = np.full(n_core, np.nan)
     boundary = np.zeros(n_core, dtype=bool)
     normal = np.zeros((n_core, 3), dtype=np.float32)
+    kind, value = depth
+    _ignore_tile_budget_warnings()
+    exhausted, n_steps = True, 0
+    known_level = float("-inf")
     if n_core:
-        opts = SimplifyOptions(**{**options, "boundary_threshold": threshold,
-                                  "progressive": True})
-        res = simplify_points(xyz, count=len(xyz), frozen=_halo_frozen(frozen, opts),
-                              options=opts)
+        tile_frozen = _halo_frozen(frozen, SimplifyOptions(**options).mode)
+        soft = tile_frozen is None
+        state = _state(store, tile, xyz, tile_frozen)
+        if kind == "keep":
+            n_remove = max(n_core - int(value), 0)
+            if soft:  # the halo thins with the core: remove the same share of the whole tile
+                n_remove = min(int(np.ceil(n_remove * len(xyz) / n_core)), len(xyz))
+            opts = {**options, "progressive": False, "progressive_until": None}
+            count = len(xyz) - n_remove
+        elif kind == "level":
+            level = float(value)
+            opts = {**options, "progressive": True,
+                    "progressive_until": level if np.isfinite(level) else None}
+            count = len(xyz)
+        else:
+            raise InputError(f"depth must be ('keep', count) or ('level', value), got {depth!r}")
+        opts["boundary_threshold"] = threshold
+        res = simplify_points(xyz, count=count, frozen=tile_frozen,
+                              options=SimplifyOptions(**opts), state=state)
+        n_all = int(res.order.size)
+        if kind == "keep":
+            exhausted = n_all < n_remove
+        else:
+            exhausted = n_all == 0 or not res.order_importance[-1] > level
+        at = np.maximum.accumulate(res.order_importance) if soft else res.order_importance
+        if soft and n_all:  # later core steps come after the last removal (maybe a halo one)
+            known_level = float(at[-1])
         core = res.order < n_core
-        step[res.order[core]] = np.arange(int(core.sum()))
-        imp[res.order[core]] = res.order_importance[core]
+        n_steps = int(core.sum())
+        step[res.order[core]] = np.arange(n_steps)
+        imp[res.order[core]] = at[core]
         boundary = res.boundary[:n_core]
         normal = res.normals[:n_core].astype(np.float32)
     store.write_result(tile, {"step": step, "importance": imp, "boundary": boundary,
-                              "normal": normal}, overwrite=True)
-    seconds = time.perf_counter() - t0
-    log.info("tile %d: %d core + %d halo points, %d boundary, %.1f s", tile, n_core,
-             len(xyz) - n_core, int(boundary.sum()), seconds)
+                              "normal": normal}, overwrite=True,
+                       attrs={"exhausted": bool(exhausted), "steps": n_steps,
+                              "known_level": known_level,
+                              "depth": [kind, float(value)]})
     return {"tile": int(tile), "n_core": int(n_core), "n_halo": int(len(xyz) - n_core),
-            "n_boundary": int(boundary.sum()), "seconds": seconds}
+            "n_boundary": int(boundary.sum()), "steps": n_steps, "exhausted": bool(exhausted),
+            "level": float(np.max(res.order_importance)) if n_steps else float("-inf"),
+            "seconds": time.perf_counter() - t0}

@@ -312,12 +312,16 @@ def _leaf_boxes(axis, split, left, right, leaf, n_tiles):
     return out_lo, out_hi
 
 
-def _choose_split(coords: np.ndarray) -> float | None:
+def _choose_split(coords: np.ndarray, halo: float = 0.0, slack: float = 0.1) -> float | None:
     """Split value near the median of ``coords`` that leaves points on both sides.
 
     Returns a value ``s`` with ``min(coords) < s <= max(coords)`` (so ``coords < s`` and
-    ``coords >= s`` are both non-empty), as close to the median rank as ties allow; ``None``
-    when all values are equal.
+    ``coords >= s`` are both non-empty); ``None`` when all values are equal. With ``halo = 0``
+    it is as close to the median rank as ties allow. With ``halo > 0`` it is, among the cuts
+    leaving between ``1/2 - slack`` and ``1/2 + slack`` of the points on each side, the one
+    with the fewest points within ``halo`` of it (then the closest to the median): a cut
+    through a flat face lying across the axis (a scan has many points at almost one
+    coordinate there) would put half that face in each tile's halo.
     """
     v = np.sort(coords)
     n = v.shape[0]
@@ -325,7 +329,16 @@ def _choose_split(coords: np.ndarray) -> float | None:
         return None
     # Candidate cut positions k (left = v[:k], right = v[k:]) are where v[k-1] < v[k].
     steps = np.flatnonzero(v[1:] > v[:-1]) + 1
-    k = int(steps[np.argmin(np.abs(steps - n // 2))])
+    off = np.abs(steps - n // 2)
+    if halo > 0:
+        near = off <= slack * n
+        if near.any():
+            steps, off = steps[near], off[near]
+            mid = v[steps - 1] + (v[steps] - v[steps - 1]) / 2.0
+            crowd = (np.searchsorted(v, mid + halo, side="right")
+                     - np.searchsorted(v, mid - halo, side="left"))
+            off = off + (n + 1) * (crowd - crowd.min()).astype(np.int64)  # crowd first
+    k = int(steps[np.argmin(off)])
     a, b = v[k - 1], v[k]
     s = a + (b - a) / 2.0
     if not a < s <= b:  # adjacent floats: the midpoint rounds onto an end
@@ -334,11 +347,15 @@ def _choose_split(coords: np.ndarray) -> float | None:
 
 
 def plan_tiles(sample_xyz, n_total: int, tile_points: int, *, bounds=None,
-               safety: float = 3.0) -> TilePlan:
+               safety: float = 3.0, halo: float = 0.0) -> TilePlan:
     """Plan count-balanced tiles from a random sample of the cloud.
 
     Each node's sample is cut at (close to) its median along the axis of the sample's largest
-    extent; both halves are split again until the leaf is small enough. A leaf holding ``c``
+    extent; both halves are split again until the leaf is small enough. With ``halo``, the cut
+    may move between the 40 % and 60 % ranks to where the fewest points lie within ``halo``
+    of it: on a scan of a part, a median cut often runs through a flat face across the axis,
+    and then each side's halo holds half the face (measured: a 36k-point tile with a 227k-point
+    halo on a 10M scan). A leaf holding ``c``
     of the ``s`` sample points is estimated to hold ``n_total * c / s`` points of the cloud.
     It is accepted when::
 
@@ -366,6 +383,8 @@ def plan_tiles(sample_xyz, n_total: int, tile_points: int, *, bounds=None,
         Bounding box ``[lo, hi]`` of the whole cloud, stored in the plan.
     safety : float, default 3.0
         Number of standard deviations of sampling error added to the estimate.
+    halo : float, default 0
+        Halo width the tiles will get (model units); 0 cuts at the median.
 
     Returns
     -------
@@ -387,6 +406,9 @@ def plan_tiles(sample_xyz, n_total: int, tile_points: int, *, bounds=None,
     safety = float(safety)
     if not (np.isfinite(safety) and safety >= 0):
         raise InputError(f"safety must be a finite number >= 0, got {safety}")
+    halo = float(halo)
+    if not (np.isfinite(halo) and halo >= 0):
+        raise InputError(f"halo must be a finite number >= 0, got {halo}")
     fpc = max(0.0, 1.0 - s / n_total)
     scale = n_total / s
 
@@ -416,7 +438,7 @@ def plan_tiles(sample_xyz, n_total: int, tile_points: int, *, bounds=None,
             for a in np.argsort(-extent, kind="stable"):
                 if extent[a] <= 0:
                     break
-                sv = _choose_split(pts[:, a])
+                sv = _choose_split(pts[:, a], halo)
                 if sv is not None:
                     cut = (int(a), sv)
                     break

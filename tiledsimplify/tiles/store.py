@@ -9,6 +9,8 @@ Layout of the store directory (a zarr v3 group)::
     tiles/<id>/result/<name>       (k, ...)        written by :meth:`TileStore.write_result`;
                                                    the result group's attribute ``done`` is
                                                    set true only after all its arrays are written
+    tiles/<id>/state/<name>        any shape       scratch state one pass leaves for the next
+                                                   (:meth:`TileStore.write_state`), same rule
 
 Root attributes: ``format``/``format_version``, ``complete`` (false until the ingest has
 finished), ``plan`` (:meth:`TilePlan.to_dict`), ``halo``, ``halo_is_default``, ``spacing``,
@@ -277,8 +279,10 @@ class _TileBuffer:
         self.written = 0
 
     def add(self, parts: dict[str, np.ndarray]):
+        # copies, not views: a view of a few rows would keep the whole input chunk alive, and
+        # with many tiles holding remainders, memory would grow with the number of chunks
         for k, v in parts.items():
-            self.pieces[k].append(v)
+            self.pieces[k].append(np.array(v, copy=True))
         self.pending += next(iter(parts.values())).shape[0]
 
     def flush(self, aligned: bool) -> tuple[int, list]:
@@ -307,7 +311,7 @@ class _TileBuffer:
             data = np.concatenate(self.pieces[k]) if len(self.pieces[k]) > 1 \
                 else self.pieces[k][0]
             jobs.append((arr, self.written, end, data[:n]))
-            self.pieces[k] = [data[n:]] if n < data.shape[0] else []
+            self.pieces[k] = [data[n:].copy()] if n < data.shape[0] else []
         self.written = end
         self.pending -= n
         return n, jobs
@@ -469,7 +473,7 @@ class TileStore:
         if halo is None:
             halo = HALO_SPACINGS * spacing
         bounds = np.stack([lo, hi])
-        plan = plan_tiles(sample, n, tile_points, bounds=bounds)
+        plan = plan_tiles(sample, n, tile_points, bounds=bounds, halo=halo)
         del sample, sampler
         spec = check.spec or {}
 
@@ -864,7 +868,7 @@ class TileStore:
         return list(g.attrs.get("names", []))
 
     def write_result(self, tile: int, arrays: Mapping[str, Any], *,
-                     overwrite: bool = False) -> None:
+                     overwrite: bool = False, attrs: Mapping[str, Any] | None = None) -> None:
         """Write a tile's result arrays, then mark the tile done.
 
         Each array runs over the tile's core points (first dimension = :meth:`count`). The
@@ -880,6 +884,8 @@ class TileStore:
             Numeric or bool arrays of shape (count, ...).
         overwrite : bool, default False
             Replace a tile that is already done.
+        attrs : mapping, optional
+            JSON-serialisable values stored with the result (:meth:`result_attrs`).
 
         Raises
         ------
@@ -918,7 +924,54 @@ class TileStore:
         for name, arr in data.items():
             rg.create_array(name, data=arr, chunks=(rows,) + arr.shape[1:],
                             compressors=_codec())
-        rg.update_attributes({"done": True, "names": list(data), "written_utc": _now()})
+        extra = json.loads(json.dumps(dict(attrs or {})))
+        rg.update_attributes({"attrs": extra, "done": True, "names": list(data),
+                              "written_utc": _now()})
+
+    def result_attrs(self, tile: int) -> dict:
+        """The ``attrs`` stored with a done tile's result (empty if none or not done)."""
+        g = self._result_group(self._tile(tile))
+        if g is None or g.attrs.get("done") is not True:
+            return {}
+        return dict(g.attrs.get("attrs", {}))
+
+    # ------------------------------------------------------------------ scratch state
+    def write_state(self, tile: int, arrays: Mapping[str, Any],
+                    attrs: Mapping[str, Any] | None = None) -> None:
+        """Save a tile's intermediate state: arrays of any length, at ``tiles/<id>/state``.
+
+        For work one pass of a run computes and a later pass reuses (the neighbourhoods of
+        the tile's points). Like results, the state counts only once all arrays are written;
+        an earlier state is replaced.
+        """
+        t = self._tile(tile)
+        tg = zarr.open_group(self._store, path=f"tiles/{t}", mode="r+")
+        if "state" in tg:
+            del tg["state"]
+        sg = tg.create_group("state", attributes={"done": False})
+        for name, arr in arrays.items():
+            arr = np.ascontiguousarray(arr)
+            rows = max(1, (1 << 20) // max(1, arr[:1].nbytes))
+            sg.create_array(str(name), data=arr, chunks=(rows,) + arr.shape[1:],
+                            compressors=_codec())
+        sg.update_attributes({"attrs": json.loads(json.dumps(dict(attrs or {}))),
+                              "names": list(arrays), "done": True})
+
+    def read_state(self, tile: int) -> tuple[dict[str, np.ndarray], dict] | None:
+        """A tile's state saved by :meth:`write_state`: ``(arrays, attrs)``, or None."""
+        try:
+            g = zarr.open_group(self._store, path=f"tiles/{self._tile(tile)}/state", mode="r")
+        except (FileNotFoundError, KeyError):
+            return None
+        if g.attrs.get("done") is not True:
+            return None
+        return {n: g[n][:] for n in g.attrs["names"]}, dict(g.attrs.get("attrs", {}))
+
+    def delete_state(self, tile: int) -> None:
+        """Remove a tile's state (if any) to free the disk space."""
+        tg = zarr.open_group(self._store, path=f"tiles/{self._tile(tile)}", mode="r+")
+        if "state" in tg:
+            del tg["state"]
 
     def read_result(self, tile: int, name: str) -> np.ndarray:
         """Read one result array of a done tile.
