@@ -140,3 +140,16 @@ def test_maintenance_equals_rebuild(kind):
     maintained, fresh = _remove_sequence(X, victims)
     diffs = [i for i in range(len(X)) if maintained[i] != fresh[i]]
     assert diffs == []
+
+
+@pytest.mark.parametrize("shape", [(400, 3), (300, 2), (5, 3)])
+def test_simplex_edges_equal_unique_of_all_simplex_edges(shape):
+    """The one-pass edge extraction gives exactly the sorted unique edges np.unique gives."""
+    from scipy.spatial import Delaunay
+    X = np.random.default_rng(1).random(shape)
+    S = Delaunay(X).simplices.astype(np.int64)
+    d = S.shape[1]
+    pairs = np.concatenate([np.sort(S[:, [i, j]], axis=1) for i in range(d)
+                            for j in range(i + 1, d)])
+    assert np.array_equal(voronoi._simplex_edges(S), np.unique(pairs, axis=0))
+    assert voronoi._simplex_edges(np.empty((0, 4), np.int64)).shape == (0, 2)
