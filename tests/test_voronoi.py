@@ -140,3 +140,31 @@ def test_maintenance_equals_rebuild(kind):
     maintained, fresh = _remove_sequence(X, victims)
     diffs = [i for i in range(len(X)) if maintained[i] != fresh[i]]
     assert diffs == []
+
+
+@pytest.mark.parametrize("shape", [(400, 3), (300, 2), (5, 3)])
+def test_simplex_edges_equal_unique_of_all_simplex_edges(shape):
+    """The one-pass edge extraction gives exactly the sorted unique edges np.unique gives."""
+    from scipy.spatial import Delaunay
+    X = np.random.default_rng(1).random(shape)
+    S = Delaunay(X).simplices.astype(np.int64)
+    d = S.shape[1]
+    pairs = np.concatenate([np.sort(S[:, [i, j]], axis=1) for i in range(d)
+                            for j in range(i + 1, d)])
+    assert np.array_equal(voronoi._simplex_edges(S), np.unique(pairs, axis=0))
+    assert voronoi._simplex_edges(np.empty((0, 4), np.int64)).shape == (0, 2)
+
+
+def test_from_edges_sorted_fast_path_equals_general_path():
+    """Sorted upper edges take a linear-time path; it must build exactly the same lists."""
+    rng = np.random.default_rng(2)
+    n = 500
+    a, b = rng.integers(0, n, 4000), rng.integers(0, n, 4000)
+    keep = a != b
+    E = np.unique(np.stack([np.minimum(a[keep], b[keep]), np.maximum(a[keep], b[keep])], 1),
+                  axis=0)
+    for slack in (0, 8):
+        fast = adjacency.from_edges(n, E, slack=slack)
+        general = adjacency.from_edges(n, E[::-1, ::-1], slack=slack)  # unsorted: lexsort path
+        for x, y in zip(fast, general):
+            assert x.dtype == y.dtype and np.array_equal(x, y)

@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .clip import clip, square
 from .linalg import covariance_about, smallest_axis, sym3_eigvals, tangent_basis
 
@@ -85,7 +85,26 @@ def _plane_size(X, p, idx, d2, m):
             if d2[j] > limit:
                 m = j
                 break
+    # The answer is the first k >= MIN_PLANE that reaches SPREAD, which needs no eigenvalues
+    # for k < MIN_PLANE: those are computed (from the same running sums, so the same values)
+    # only when no such k exists and the largest spread over all k decides.
     px, py, pz = X[p, 0], X[p, 1], X[p, 2]
+    sx = sy = sz = 0.0
+    sxx = sxy = sxz = syy = syz = szz = 0.0
+    for k in range(1, m + 1):
+        q = idx[k - 1]
+        x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
+        sx += x
+        sy += y
+        sz += z
+        sxx += x * x
+        sxy += x * y
+        sxz += x * z
+        syy += y * y
+        syz += y * z
+        szz += z * z
+        if k >= MIN_PLANE and _spread(k, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz) >= SPREAD:
+            return k
     sx = sy = sz = 0.0
     sxx = sxy = sxz = syy = syz = szz = 0.0
     best = -1.0
@@ -104,18 +123,22 @@ def _plane_size(X, p, idx, d2, m):
         szz += z * z
         if k < 2:
             continue
-        cnt = k + 1.0
-        mx, my, mz = sx / cnt, sy / cnt, sz / cnt
-        l0, l1, l2 = sym3_eigvals(sxx / cnt - mx * mx, sxy / cnt - mx * my,
-                                  sxz / cnt - mx * mz, syy / cnt - my * my,
-                                  syz / cnt - my * mz, szz / cnt - mz * mz)
-        spread = l1 / l2 if l2 > 0.0 else 0.0
-        if k >= MIN_PLANE and spread >= SPREAD:
-            return k
+        spread = _spread(k, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)
         if spread > best:
             best = spread
             kbest = k
     return kbest
+
+
+@jit_inline
+def _spread(k, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz):
+    """Middle / largest eigenvalue of the covariance of ``p`` and ``k`` points (running sums)."""
+    cnt = k + 1.0
+    mx, my, mz = sx / cnt, sy / cnt, sz / cnt
+    l0, l1, l2 = sym3_eigvals(sxx / cnt - mx * mx, sxy / cnt - mx * my,
+                              sxz / cnt - mx * mz, syy / cnt - my * my,
+                              syz / cnt - my * mz, szz / cnt - mz * mz)
+    return l1 / l2 if l2 > 0.0 else 0.0
 
 
 @jit

@@ -170,15 +170,53 @@ def filter_candidates(X, start, cnt, pool, half, tol):
     return out[:k]
 
 
+@jit
+def _unique_edges(simplices, n):
+    """Unique undirected edges ``(i, j)``, ``i < j``, of ``simplices``, sorted by ``(i, j)``.
+
+    Buckets each edge by its smaller end, then deduplicates and sorts each (short) bucket: one
+    linear pass instead of ``np.unique`` on all ``d(d-1)/2`` edges of every simplex.
+    """
+    t_n, d = simplices.shape
+    count = np.zeros(n + 1, dtype=np.int64)
+    for t in range(t_n):
+        for i in range(d):
+            for j in range(i + 1, d):
+                count[min(simplices[t, i], simplices[t, j]) + 1] += 1
+    for i in range(n):
+        count[i + 1] += count[i]
+    fill = count[:-1].copy()
+    other = np.empty(count[n], dtype=np.int64)
+    for t in range(t_n):
+        for i in range(d):
+            for j in range(i + 1, d):
+                u, v = simplices[t, i], simplices[t, j]
+                if u > v:
+                    u, v = v, u
+                other[fill[u]] = v
+                fill[u] += 1
+    mark = np.full(n, -1, dtype=np.int64)
+    out = np.empty((count[n], 2), dtype=np.int64)
+    k = 0
+    for a in range(n):
+        k0 = k
+        for t in range(count[a], count[a + 1]):
+            b = other[t]
+            if mark[b] != a:
+                mark[b] = a
+                out[k, 0] = a
+                out[k, 1] = b
+                k += 1
+        out[k0:k, 1] = np.sort(out[k0:k, 1])
+    return out[:k]
+
+
 def _simplex_edges(simplices):
-    """Unique undirected edges (i < j) of a simplicial complex."""
-    simplices = np.asarray(simplices, dtype=np.int64)
-    d = simplices.shape[1]
-    n = int(simplices.max()) + 1 if simplices.size else 0
-    a = np.concatenate([simplices[:, i] for i in range(d) for j in range(i + 1, d)])
-    b = np.concatenate([simplices[:, j] for i in range(d) for j in range(i + 1, d)])
-    keys = np.unique(np.minimum(a, b) * n + np.maximum(a, b))  # one int64 per edge: fast
-    return np.stack([keys // n, keys % n], axis=1) if n else np.empty((0, 2), np.int64)
+    """Unique undirected edges (i < j) of a simplicial complex, sorted by (i, j)."""
+    simplices = np.ascontiguousarray(simplices, dtype=np.int64)
+    if not simplices.size:
+        return np.empty((0, 2), np.int64)
+    return _unique_edges(simplices, int(simplices.max()) + 1)
 
 
 def _all_pairs(n):
