@@ -7,9 +7,10 @@ from scipy.spatial import Delaunay, Voronoi
 from tiledsimplify.core import local_mesh as lm
 
 
-def facet_width(X, a, b, others, half):
+def facet_width(X, a, b, others, half, reach=np.inf):
     """Largest radius of a disc inside the Voronoi facet of (a, b), clipped to the square of
-    half-size ``half`` around their midpoint, by linear programming (negative: no facet)."""
+    half-size ``half`` around their midpoint and to the disc where both points are within
+    ``reach`` (a 512-gon around it), by linear programming (negative: no facet)."""
     pa = X[a]
     d = X[b] - pa
     L = np.linalg.norm(d)
@@ -37,19 +38,27 @@ def facet_width(X, a, b, others, half):
     for gx, gy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
         A.append([gx, gy, 1.0])
         bb.append(half)
+    if np.isfinite(reach):
+        r2 = reach ** 2 - L ** 2 / 4
+        if r2 <= 0:
+            return -1.0
+        for t in np.linspace(0, 2 * np.pi, 512, endpoint=False):
+            A.append([np.cos(t), np.sin(t), 1.0])
+            bb.append(np.sqrt(r2))
     r = linprog([0, 0, -1], A_ub=np.array(A), b_ub=np.array(bb),
                 bounds=[(None, None), (None, None), (None, None)], method="highs")
     return float(r.x[2]) if r.status == 0 else -1.0
 
 
-def voronoi_edges(X, half, tol, candidates=None):
-    """Pairs whose facet (against *all* other points) is wider than ``tol``, by LP."""
+def voronoi_edges(X, half, tol, candidates=None, reach=np.inf):
+    """Pairs whose facet (against *all* other points, within ``reach``) is wider than
+    ``tol``, by LP."""
     n = len(X)
     if candidates is None:
         candidates = [(i, j) for i in range(n) for j in range(i + 1, n)]
     out = set()
     for a, b in candidates:
-        if facet_width(X, a, b, range(n), half) > tol:
+        if facet_width(X, a, b, range(n), half, reach) > tol:
             out.add((min(a, b), max(a, b)))
     return out
 
@@ -164,7 +173,9 @@ def importance(X, normals, boundary, p, dn):
 
 def coverage_importance(X, normals, boundary, p, dn, weight):
     """Eq. (1) (0 if every neighbour is a boundary point) + weight * mean squared distance."""
+    if not len(dn):
+        return np.inf
     e = importance(X, normals, boundary, p, dn)
     e = 0.0 if e == np.inf else e
-    rho2 = float(np.mean(np.sum((X[dn] - X[p]) ** 2, axis=1))) if dn else 0.0
+    rho2 = float(np.mean(np.sum((X[dn] - X[p]) ** 2, axis=1)))
     return e + weight * rho2

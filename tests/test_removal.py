@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from tiledsimplify.core import adjacency, boundary, heap, importance
 from tiledsimplify.core.removal import remove_points
@@ -38,9 +39,19 @@ def _cloud(kind, n, seed=0):
 MEASURES = [(0, 0.0), (1, 0.3)]
 
 
-def _state(X, code=0, weight=0.0):
+#: Voronoi reach, in spacings: the paper's unbounded rule, and a bounded one that the
+#: removals outgrow (gaps wider than twice the reach; isolated points)
+REACHES = [np.inf, 4.0]
+
+
+def _reach(X, spacings):
+    return spacings * np.median(cKDTree(X).query(X, k=2)[0][:, 1]) if np.isfinite(spacings) \
+        else np.inf
+
+
+def _state(X, code=0, weight=0.0, reach=np.inf):
     D = scale_of(X)
-    st = neighbourhoods(X, D)
+    st = neighbourhoods(X, D, reach)
     dev = np.zeros(len(X))
     boundary.all_deviations(X, st.normals, st.dn, st.dn_cnt, dev)
     flags, _ = boundary.detect(dev)
@@ -49,12 +60,14 @@ def _state(X, code=0, weight=0.0):
     return D, st, flags, imp
 
 
+@pytest.mark.parametrize("reach", REACHES)
 @pytest.mark.parametrize("measure", MEASURES)
 @pytest.mark.parametrize("kind", ["wavy", "box", "quantised"])
-def test_maintained_state_equals_recomputation(kind, measure):
+def test_maintained_state_equals_recomputation(kind, measure, reach):
     code, weight = measure
     X = _cloud(kind, 1500)
-    D, st, flags, imp = _state(X, code, weight)
+    reach = _reach(X, reach)
+    D, st, flags, imp = _state(X, code, weight, reach)
     frozen = np.zeros(len(X), bool)
     frozen[::17] = True
     removable = ~flags & ~frozen
@@ -62,13 +75,13 @@ def test_maintained_state_equals_recomputation(kind, measure):
     order, at, st.pool = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
         st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), code, weight, 0, 0.0,
-        steps, BOX_FACTOR * D, TOL_FACTOR * D)
+        steps, BOX_FACTOR * D, TOL_FACTOR * D, reach)
     assert len(order) == steps == len(set(order.tolist()))
     assert not (flags[order] | frozen[order]).any()
     alive = np.ones(len(X), bool)
     alive[order] = False
     keep = np.flatnonzero(alive)
-    fresh = neighbourhoods(X[keep], D)
+    fresh = neighbourhoods(X[keep], D, reach)
     vn_m = adjacency.to_sets(st.start, st.cnt, st.pool)
     vn_f = adjacency.to_sets(fresh.start, fresh.cnt, fresh.pool)
     imp_f = np.zeros(len(keep))
@@ -84,14 +97,14 @@ def test_maintained_state_equals_recomputation(kind, measure):
             assert imp[p] == imp_f[i], p
 
 
-def _naive_greedy(X, flags, frozen, steps, D, code, weight):
+def _naive_greedy(X, flags, frozen, steps, D, code, weight, reach):
     """Recompute everything from scratch before every removal."""
     tie = heap.coordinate_hash(X)
     alive = np.ones(len(X), bool)
     order, at = [], []
     for _ in range(steps):
         keep = np.flatnonzero(alive)
-        st = neighbourhoods(X[keep], D)
+        st = neighbourhoods(X[keep], D, reach)
         imp = np.zeros(len(keep))
         importance.all_importance(code, X[keep], st.normals, flags[keep], st.dn, st.dn_cnt, weight,
                                   imp)
@@ -106,12 +119,14 @@ def _naive_greedy(X, flags, frozen, steps, D, code, weight):
     return order, at
 
 
+@pytest.mark.parametrize("reach", REACHES)
 @pytest.mark.parametrize("measure", MEASURES)
 @pytest.mark.parametrize("kind", ["wavy", "box"])
-def test_greedy_order_equals_naive_from_scratch(kind, measure):
+def test_greedy_order_equals_naive_from_scratch(kind, measure, reach):
     code, weight = measure
     X = _cloud(kind, 160, seed=1)
-    D, st, flags, imp = _state(X, code, weight)
+    reach = _reach(X, reach)
+    D, st, flags, imp = _state(X, code, weight, reach)
     frozen = np.zeros(len(X), bool)
     frozen[:10] = True
     removable = ~flags & ~frozen
@@ -119,7 +134,7 @@ def test_greedy_order_equals_naive_from_scratch(kind, measure):
     order, at, _ = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
         st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), code, weight, 0, 0.0,
-        steps, BOX_FACTOR * D, TOL_FACTOR * D)
-    ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D, code, weight)
+        steps, BOX_FACTOR * D, TOL_FACTOR * D, reach)
+    ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D, code, weight, reach)
     assert order.tolist() == ref_order
     np.testing.assert_array_equal(at, ref_at)

@@ -86,7 +86,7 @@ def test_saved_neighbourhood_state_gives_the_same_run():
     frozen = X[:, 0] > 3.0
     paper = SimplifyOptions(mode="paper")  # the state's deviation is the paper's measure
     fresh = simplify_points(X, count=len(X), frozen=frozen, options=paper)
-    state, deviation = neighbourhood_state(X, frozen)
+    state, deviation = neighbourhood_state(X, frozen, paper)
     np.testing.assert_array_equal(deviation, fresh.deviation)
     arrays, how = state.to_arrays()
     back = Neighbourhoods.from_arrays(arrays, how)
@@ -104,6 +104,9 @@ def test_saved_neighbourhood_state_gives_the_same_run():
     np.testing.assert_array_equal(again.boundary, fresh.boundary)
     with pytest.raises(InputError, match="neighbourhood_state on the same points"):
         simplify_points(X[:-30], count=10, state=neighbourhood_state(X)[0])
+    with pytest.raises(InputError, match="Voronoi reach"):  # built for another reach
+        simplify_points(X, count=10, frozen=frozen, state=neighbourhood_state(X, frozen)[0],
+                        options=paper)
     with pytest.raises(InputError, match="progressive_until"):
         SimplifyOptions(progressive_until=float("nan"))
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from scipy.spatial import ConvexHull
+from scipy.spatial import ConvexHull, cKDTree
 
 from tiledsimplify.core import adjacency, voronoi
 
@@ -13,8 +13,8 @@ def _edges(lists):
     return {(i, j) for i, s in enumerate(lists) for j in s if i < j}
 
 
-def _build(X, scale=None):
-    (start, cnt, cap, pool, meta), how = voronoi.voronoi_neighbours(X, scale=scale)
+def _build(X, scale=None, reach=np.inf):
+    (start, cnt, cap, pool, meta), how = voronoi.voronoi_neighbours(X, scale=scale, reach=reach)
     return (start, cnt, cap, pool, meta), how
 
 
@@ -39,67 +39,52 @@ def test_construction_equals_delaunay_on_generic_points(kind):
     assert missing == set()
 
 
-def test_facet_rule_equals_linear_programming():
+@pytest.mark.parametrize("reach", [np.inf, 0.25])
+def test_facet_rule_equals_linear_programming(reach):
     rng = np.random.default_rng(1)
     X = rng.random((60, 3))
     X -= 0.5
     D = voronoi.scale_of(X)
-    (start, cnt, cap, pool, meta), _ = _build(X)
+    (start, cnt, cap, pool, meta), _ = _build(X, reach=reach)
     got = _edges(adjacency.to_sets(start, cnt, pool))
     ref = naive.voronoi_edges(X, voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D,
-                              candidates=sorted(naive.delaunay_edges(X)))
+                              candidates=sorted(naive.delaunay_edges(X)), reach=reach)
     assert got == ref
+    if np.isfinite(reach):  # the reach cuts a good share of the edges, not all
+        (s0, c0, _, p0, _), _ = _build(X)
+        unbounded = _edges(adjacency.to_sets(s0, c0, p0))
+        assert got < unbounded and len(got) > 0.3 * len(unbounded)
 
 
-def test_grid_keeps_only_axis_neighbours():
-    # quantised coordinates: every cube of 8 grid points is co-spherical; the diagonals'
-    # facets are degenerate and must not count, whatever Qhull's tie-breaking
-    g = np.arange(6) * 0.001
-    X = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3) + 100.0
-    (start, cnt, cap, pool, meta), _ = _build(X)
-    got = _edges(adjacency.to_sets(start, cnt, pool))
-    d = np.linalg.norm(X[[a for a, _ in got]] - X[[b for _, b in got]], axis=1)
-    np.testing.assert_allclose(d, 0.001, rtol=1e-9)
-    assert len(got) == 3 * 5 * 36
+def test_reach_bounds_the_neighbours_of_a_quantised_flat_face():
+    """A flat face quantised like a LAS file lies in a few exact layers. Seen from outside,
+    the sparse outermost layer owns the far half-space: without a reach each of its points
+    is a Voronoi neighbour of hundreds of face points (thousands on a 10M-point scan, which
+    made removal 10-30x slower); within 10 spacings only the nearby ones count."""
+    rng = np.random.default_rng(7)
+    n = 6000
+    face = np.c_[rng.random((n, 2)) * 0.08, rng.normal(0.0, 1e-4, n)]  # spacing ~5e-4
+    face[:, 2] = np.round(face[:, 2] / 5e-4) * 5e-4  # layers 0 and +-5e-4 (~1 % each side)
+    X = np.vstack([face, np.c_[rng.random((n, 2)) * 0.08, np.full(n, -0.02)]])
+    X = np.unique(np.round(X / 1e-4) * 1e-4, axis=0)
+    X -= X.mean(0)
+    spacing = np.median(cKDTree(X).query(X, k=2)[0][:, 1])
+    (s0, c0, _, p0, _), _ = _build(X)
+    (s1, c1, _, p1, _), _ = _build(X, reach=10 * spacing)
+    assert c0.max() > 300
+    assert c1.max() < 50
+    # within the surface nothing changes: the same edges up to a few spacings
+    e0, e1 = _edges(adjacency.to_sets(s0, c0, p0)), _edges(adjacency.to_sets(s1, c1, p1))
+    assert e1 <= e0
+
+    def short(E):
+        return {e for e in E if np.linalg.norm(X[e[0]] - X[e[1]]) < 3 * spacing}
+    assert short(e1) == short(e0)
 
 
-def test_coplanar_and_collinear_and_tiny_inputs():
-    rng = np.random.default_rng(3)
-    P = np.c_[rng.random((300, 2)), np.zeros(300)] @ np.linalg.qr(rng.normal(size=(3, 3)))[0]
-    (start, cnt, cap, pool, meta), how = _build(P)
-    assert how.startswith("plane")
-    got = _edges(adjacency.to_sets(start, cnt, pool))
-    from scipy.spatial import Delaunay
-    Q = P - P.mean(0)
-    _, _, vt = np.linalg.svd(Q)
-    tri = Delaunay(Q @ vt[:2].T)
-    ref = {tuple(sorted((int(s[i]), int(s[j])))) for s in tri.simplices
-           for i in range(3) for j in range(i + 1, 3)}
-    hull = set(ConvexHull(Q @ vt[:2].T).vertices.tolist())
-    assert got <= ref
-    assert {e for e in ref - got if not (e[0] in hull and e[1] in hull)} == set()
-
-    L = np.outer(rng.permutation(50), [1.0, 2.0, 3.0])
-    (start, cnt, cap, pool, meta), how = _build(L)
-    assert how == "line"
-    lists = adjacency.to_sets(start, cnt, pool)
-    order = np.argsort(L[:, 0])
-    for a, b in zip(order[:-1], order[1:]):
-        assert b in lists[a]
-    assert sum(len(s) for s in lists) == 2 * 49
-
-    for n in range(0, 6):
-        X = rng.random((n, 3))
-        (start, cnt, cap, pool, meta), _ = _build(X)
-        if n >= 2:
-            ref = naive.voronoi_edges(X, voronoi.BOX_FACTOR * voronoi.scale_of(X),
-                                      voronoi.TOL_FACTOR * voronoi.scale_of(X))
-            assert _edges(adjacency.to_sets(start, cnt, pool)) == ref
-
-
-def _remove_sequence(X, victims):
+def _remove_sequence(X, victims, reach=np.inf):
     D = voronoi.scale_of(X)
-    (start, cnt, cap, pool, meta), _ = _build(X, scale=D)
+    (start, cnt, cap, pool, meta), _ = _build(X, scale=D, reach=reach)
     size = 4096
     link = np.empty(size, np.int64)
     cand = np.empty(size, np.int64)
@@ -109,12 +94,12 @@ def _remove_sequence(X, victims):
     for p in victims:
         k, pool = voronoi.remove_point(X, p, start, cnt, cap, pool, meta,
                                        voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D,
-                                       link, cand, bufs, lbufs, frame)
+                                       reach, link, cand, bufs, lbufs, frame)
     alive = np.ones(len(X), bool)
     alive[victims] = False
     maintained = adjacency.to_sets(start, cnt, pool, alive)
     keep = np.flatnonzero(alive)
-    (s2, c2, _, p2, _), _ = _build(X[keep], scale=D)
+    (s2, c2, _, p2, _), _ = _build(X[keep], scale=D, reach=reach)
     fresh = adjacency.to_sets(s2, c2, p2)
     fresh_global = [set()] * len(X)
     fresh_global = [set() for _ in range(len(X))]
@@ -123,8 +108,9 @@ def _remove_sequence(X, victims):
     return maintained, fresh_global
 
 
+@pytest.mark.parametrize("reach", [np.inf, 4.0])
 @pytest.mark.parametrize("kind", ["cube", "sphere", "plate", "quantised"])
-def test_maintenance_equals_rebuild(kind):
+def test_maintenance_equals_rebuild(kind, reach):
     rng = np.random.default_rng(4)
     if kind == "cube":
         X = rng.random((800, 3))
@@ -137,7 +123,9 @@ def test_maintenance_equals_rebuild(kind):
         X = np.unique(X, axis=0)
     X = X - X.mean(0)
     victims = rng.choice(len(X), len(X) * 2 // 3, replace=False)
-    maintained, fresh = _remove_sequence(X, victims)
+    if np.isfinite(reach):  # in spacings: gaps grow past twice the reach as points go
+        reach *= np.median(cKDTree(X).query(X, k=2)[0][:, 1])
+    maintained, fresh = _remove_sequence(X, victims, reach)
     diffs = [i for i in range(len(X)) if maintained[i] != fresh[i]]
     assert diffs == []
 

@@ -11,6 +11,8 @@ Sutherland & Hodgman, "Reentrant polygon clipping", CACM 17(1), 1974, specialise
 polygons and one half-plane at a time.
 """
 
+import math
+
 from ._jit import jit_inline
 
 
@@ -79,3 +81,26 @@ def area(n, xs, ys):
         j = i + 1 if i + 1 < n else 0
         s += xs[i] * ys[j] - xs[j] * ys[i]
     return 0.5 * s
+
+
+@jit_inline
+def origin_distance2(n, xs, ys):
+    """Squared distance from the origin to the convex counter-clockwise polygon
+    ``(xs, ys)[:n]`` (0 if the origin lies inside or on it)."""
+    best = math.inf
+    inside = True
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        ex, ey = xs[j] - xs[i], ys[j] - ys[i]
+        if ex * (-ys[i]) - ey * (-xs[i]) < 0.0:  # the origin is right of edge i -> outside
+            inside = False
+        ee = ex * ex + ey * ey
+        t = 0.0
+        if ee > 0.0:
+            t = -(xs[i] * ex + ys[i] * ey) / ee
+            t = min(max(t, 0.0), 1.0)
+        px, py = xs[i] + t * ex, ys[i] + t * ey
+        d = px * px + py * py
+        if d < best:
+            best = d
+    return 0.0 if inside else best

@@ -66,11 +66,12 @@ def _max_count(cnt, items, k):
 @jit
 def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
                   boundary, removable, importance, tie, code, weight, guard, guard_value, n_steps,
-                  half, tol, stop_above=math.inf):
+                  half, tol, reach, stop_above=math.inf):
     """Remove up to ``n_steps`` points, least important first.
 
     Mutates the neighbour lists, local meshes, normals and importance in place (for the
     remaining points). ``removable`` marks the candidates (not boundary, not frozen, alive);
+    ``half``, ``tol`` and ``reach`` are the Voronoi rule's (:func:`.voronoi.facet_positive`).
     ``tie`` (uint64) breaks importance ties (see :mod:`.heap`); ``code`` and ``weight`` select the
     importance measure (:func:`.importance.importance_of`). ``guard`` / ``guard_value``
     select a guard rule (:data:`GUARDS`) that can veto a removal; a vetoed point is kept.
@@ -125,8 +126,8 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
             cand = np.empty(2 * need, dtype=np.int64)
             bufs = np.empty((4, 2 * need + 5))
             lbufs = np.empty((2, 2 * need + 5), dtype=np.int64)
-        k, pool = remove_point(X, p, start, cnt, cap, pool, meta, half, tol, link, cand, bufs,
-                               lbufs, frame)
+        k, pool = remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand,
+                               bufs, lbufs, frame)
         # -- 2. local meshes and normals of the first ring
         m = _max_count(cnt, link, k)
         if m + 5 > fbufs.shape[1] or m > work.size:

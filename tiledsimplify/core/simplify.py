@@ -6,11 +6,13 @@ each in its own module — :mod:`.voronoi` (``VN_p``), :mod:`.local_mesh` (``DN_
 (Eq. (1)) and :mod:`.removal`.
 """
 
+import math
 import time
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..errors import BudgetWarning, InputError
 from . import adjacency
@@ -84,6 +86,7 @@ class Neighbourhoods:
     normals: np.ndarray
     initial_normals: np.ndarray
     how: str
+    reach: float = math.inf
 
     def to_arrays(self):
         """Compact arrays of a freshly built state: ``(arrays, how)``.
@@ -93,7 +96,8 @@ class Neighbourhoods:
         result bit for bit.
         """
         used = np.arange(MAX_DN) < self.dn_cnt[:, None]
-        return {"vn_count": self.cnt.astype(np.int32),
+        return {"reach": np.array([self.reach]),
+                "vn_count": self.cnt.astype(np.int32),
                 "vn": adjacency.to_flat(self.start, self.cnt, self.pool),
                 "dn_count": self.dn_cnt.astype(np.int8),
                 "dn": self.dn[used].astype(np.int32),
@@ -108,15 +112,17 @@ class Neighbourhoods:
         dn = np.zeros((dn_cnt.size, MAX_DN), dtype=np.int64)
         dn[np.arange(MAX_DN) < dn_cnt[:, None]] = arrays["dn"]
         normals = np.ascontiguousarray(arrays["normals"], dtype=np.float64)
+        reach = float(np.asarray(arrays.get("reach", [math.inf])).reshape(-1)[0])
         return cls(start, cnt, cap, pool, meta, dn, dn_cnt,
                    np.ascontiguousarray(arrays["plane_normals"], dtype=np.float64), normals,
-                   normals.copy(), str(how))
+                   normals.copy(), str(how), reach)
 
 
-def neighbourhoods(Xu, scale):
-    """Paper steps 1-2 on distinct points ``Xu``: ``VN_p``, ``DN_p`` and normals."""
+def neighbourhoods(Xu, scale, reach=math.inf):
+    """Paper steps 1-2 on distinct points ``Xu``: ``VN_p`` (facets within ``reach``, see
+    :func:`.voronoi.facet_positive`), ``DN_p`` and normals."""
     m = Xu.shape[0]
-    (start, cnt, cap, pool, meta), how = voronoi_neighbours(Xu, scale=scale)
+    (start, cnt, cap, pool, meta), how = voronoi_neighbours(Xu, scale=scale, reach=reach)
     dn = np.zeros((m, MAX_DN), dtype=np.int64)
     dn_cnt = np.zeros(m, dtype=np.int64)
     plane_normals = np.zeros((m, 3))
@@ -124,16 +130,29 @@ def neighbourhoods(Xu, scale):
     normals = np.zeros((m, 3))
     all_normals(Xu, dn, dn_cnt, plane_normals, normals)
     return Neighbourhoods(start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
-                          normals.copy(), how)
+                          normals.copy(), how, float(reach))
 
 
-def median_spacing(Xu, st):
+def median_spacing(Xu):
     """Median distance from a point to its nearest neighbour (0 for fewer than 2 points)."""
     if Xu.shape[0] < 2:
         return 0.0
-    nn = np.empty(Xu.shape[0])
-    edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
-    return float(np.median(nn))
+    return float(np.median(cKDTree(Xu).query(Xu, k=2)[0][:, 1]))
+
+
+def _spacing(Xu, options):
+    """The spacing that scales the coverage term and the reach: the option, else measured."""
+    return options.spacing if options.spacing is not None else median_spacing(Xu)
+
+
+def reach_length(Xu, options, spacing=None):
+    """``VN_p``'s reach in model units: ``options.reach_spacings`` x the spacing (or ``inf``)."""
+    factor = options.reach_spacings
+    if not math.isfinite(factor):
+        return math.inf
+    if spacing is None:
+        spacing = _spacing(Xu, options)
+    return factor * spacing if spacing > 0 else math.inf
 
 
 def boundary_flags(Xu, st, options):
@@ -166,6 +185,16 @@ def boundary_flags(Xu, st, options):
     return deviation, distance <= options.edge_width, threshold
 
 
+def _options(options):
+    if options is None:
+        return SimplifyOptions()
+    if isinstance(options, dict):
+        return SimplifyOptions.from_mapping(options)
+    if not isinstance(options, SimplifyOptions):
+        raise InputError(f"options must be a SimplifyOptions or a dict, got {type(options)}.")
+    return options
+
+
 def _prepare(X, frozen):
     """Distinct points, centred: ``(rep, inverse, Xu, D)`` — the representatives of the
     duplicate groups, the group of every input point, their centred coordinates (what every
@@ -179,7 +208,7 @@ def _prepare(X, frozen):
     return rep, inverse, Xu, scale_of(Xu)
 
 
-def neighbourhood_state(xyz, frozen=None):
+def neighbourhood_state(xyz, frozen=None, options=None):
     """Paper steps 1-2 (``VN_p``, ``DN_p``, normals) and the boundary measure, once.
 
     For callers that need the boundary measure of many point sets before they can simplify
@@ -190,7 +219,8 @@ def neighbourhood_state(xyz, frozen=None):
 
     Parameters
     ----------
-    xyz, frozen : as for :func:`simplify_points`.
+    xyz, frozen, options : as for :func:`simplify_points` (the options' ``reach`` and
+        ``spacing`` shape the neighbourhoods; pass the same options to the run).
 
     Returns
     -------
@@ -199,9 +229,10 @@ def neighbourhood_state(xyz, frozen=None):
     deviation : float64 (n,)
         The boundary measure of every input point (:mod:`.boundary`).
     """
+    options = _options(options)
     X, frozen = _validate(xyz, frozen)
     _, inverse, Xu, D = _prepare(X, frozen)
-    st = neighbourhoods(Xu, D)
+    st = neighbourhoods(Xu, D, reach_length(Xu, options))
     deviation_u = np.zeros(Xu.shape[0])
     boundary_mod.all_deviations(Xu, st.normals, st.dn, st.dn_cnt, deviation_u)
     return st, deviation_u[inverse]
@@ -259,12 +290,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     >>> int(res.keep.sum())
     500
     """
-    if options is None:
-        options = SimplifyOptions()
-    elif isinstance(options, dict):
-        options = SimplifyOptions.from_mapping(options)
-    elif not isinstance(options, SimplifyOptions):
-        raise InputError(f"options must be a SimplifyOptions or a dict, got {type(options)}.")
+    options = _options(options)
     X, frozen = _validate(xyz, frozen)
     n = X.shape[0]
     target = resolve_target(n, ratio, count)
@@ -282,14 +308,23 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     stats["n_duplicates"] = n - m
     lap("prepare")
 
+    spacing = None
+    if options.importance == "coverage" or math.isfinite(options.reach_spacings):
+        spacing = _spacing(Xu, options)
+    reach = reach_length(Xu, options, spacing)
     if state is None:
-        st = neighbourhoods(Xu, D)
+        st = neighbourhoods(Xu, D, reach)
     elif state.cnt.size != m:
         raise InputError(f"state was built for {state.cnt.size} distinct points, but these "
                          f"points have {m}; build it with neighbourhood_state on the same "
                          "points and frozen mask.")
+    elif state.reach != reach:
+        raise InputError(f"state was built with a Voronoi reach of {state.reach:.6g}, but these "
+                         f"options give {reach:.6g}; build it with neighbourhood_state and the "
+                         "same options (reach, spacing).")
     else:
         st = state
+    stats["reach"] = float(reach)
     stats["neighbours"] = st.how
     stats["mean_voronoi_degree"] = float(st.cnt.mean()) if m else 0.0
     stats["mean_local_mesh_degree"] = float(st.dn_cnt.mean()) if m else 0.0
@@ -299,7 +334,6 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     code = MEASURES[options.importance]
     weight = 0.0
     if options.importance == "coverage":
-        spacing = options.spacing if options.spacing is not None else median_spacing(Xu, st)
         weight = coverage_weight(spacing, options.coverage) if spacing > 0 else 0.0
         stats["spacing"] = float(spacing)
     imp_u = np.zeros(m)
@@ -322,7 +356,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
             Xu, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
             st.normals, boundary_u, alive, imp_u, tie, code, weight, GUARDS[options.guard],
             float(options.max_spacing or 0.0), n_steps, BOX_FACTOR * D, TOL_FACTOR * D,
-            stop_above)
+            st.reach, stop_above)
         return order_k, at_k
 
     if not options.progressive:

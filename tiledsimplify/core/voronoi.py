@@ -30,6 +30,18 @@ Maintenance (paper §3.3)
 Facets are clipped to a square of half-size ``100 x`` the cloud's diagonal around the pair's
 midpoint; facets that lie entirely farther away (only possible between far-apart points on the
 convex hull) are ignored. A facet thinner than ``1e-8 x`` the diagonal counts as degenerate.
+
+Reach (beyond the paper)
+    With a finite ``reach`` only the part of a facet within ``reach`` of both points counts:
+    the disc of radius ``sqrt(reach² - |ab|²/4)`` around the midpoint, where the two balls of
+    radius ``reach`` meet the bisector plane — the edges of an alpha complex. The unbounded
+    rule joins points through the far ends of their cells: across the inside of a closed
+    part, and, on the outside of a flat face of a quantised scan (a few exact layers), each
+    point of the sparse outermost layer to hundreds or thousands of face points — the
+    maintenance then costs O(degree²) per removal. The maintenance above stays exact: a new
+    facet within reach of ``a`` is reached from ``a`` through ``p``'s old cell, so ``a`` and
+    ``b`` are within-reach neighbours of ``p``, and inside the ball around ``a`` its cell is
+    bounded by its within-reach neighbours alone (tested against rebuilding).
 """
 
 import math
@@ -39,7 +51,7 @@ from scipy.spatial import Delaunay, QhullError
 
 from . import adjacency
 from ._jit import jit
-from .clip import area, clip, square
+from .clip import area, clip, origin_distance2, square
 from .linalg import any_perpendicular
 
 #: half-size of the clipping square, in units of the cloud's bounding-box diagonal
@@ -51,13 +63,16 @@ JITTER = 1e-10
 
 
 @jit
-def facet_positive(X, a, b, cand, ncand, half, tol, xa, ya, la, xb, yb, lb, frame, inside):
-    """True if points ``a`` and ``b`` share a Voronoi facet of positive area.
+def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, lb, frame,
+                   inside):
+    """True if points ``a`` and ``b`` share a Voronoi facet of positive area within ``reach``.
 
     The facet is the bisector plane of ``a`` and ``b`` clipped by the half-space
     ``|x - a| <= |x - s|`` of every ``s`` in ``cand[:ncand]`` (entries equal to ``a`` or ``b``
     are skipped). Each half-space is shrunk by ``tol`` so that a facet of zero width (four or
-    more co-spherical points) comes out empty. If ``inside >= 0``, the facet is first clipped
+    more co-spherical points) comes out empty. Only the part of the facet within ``reach`` of
+    ``a`` and ``b`` counts — the disc of radius ``sqrt(reach² - |ab|²/4)`` around their
+    midpoint, shrunk by ``tol`` too (``inf``: the whole facet, as the paper). If ``inside >= 0``, the facet is first clipped
     to ``|x - inside| <= |x - a|``: after the removal of ``inside`` a new facet lies entirely in
     its former cell, and this one cut usually leaves little for the others to empty.
 
@@ -69,6 +84,14 @@ def facet_positive(X, a, b, cand, ncand, half, tol, xa, ya, la, xb, yb, lb, fram
     L = math.sqrt(dx * dx + dy * dy + dz * dz)
     if L == 0.0:
         return False
+    r2 = math.inf  # squared radius of the disc the facet must reach into
+    if reach < math.inf:
+        r = math.sqrt(max(reach * reach - 0.25 * L * L, 0.0)) - tol
+        if r <= 0.0:
+            return False
+        r2 = r * r
+        if r < half:
+            half = r  # the square around the disc
     u0, u1, u2 = dx / L, dy / L, dz / L
     e1 = frame[0]
     e2 = frame[1]
@@ -126,12 +149,12 @@ def facet_positive(X, a, b, cand, ncand, half, tol, xa, ya, la, xb, yb, lb, fram
         if n < 3:
             return False
     if cur == 0:
-        return area(n, xa, ya) > 0.0
-    return area(n, xb, yb) > 0.0
+        return area(n, xa, ya) > 0.0 and (r2 == math.inf or origin_distance2(n, xa, ya) < r2)
+    return area(n, xb, yb) > 0.0 and (r2 == math.inf or origin_distance2(n, xb, yb) < r2)
 
 
 @jit
-def filter_candidates(X, start, cnt, pool, half, tol):
+def filter_candidates(X, start, cnt, pool, half, tol, reach):
     """Keep the candidate edges whose facet has positive area; returns a (k, 2) edge array.
 
     The cell of ``a`` is bounded by its candidate neighbours (a superset of its true Voronoi
@@ -162,8 +185,8 @@ def filter_candidates(X, start, cnt, pool, half, tol):
             b = cand[j]
             if b <= a:
                 continue
-            if facet_positive(X, a, b, cand, cnt[a], half, tol, xa, ya, la, xb, yb, lb, frame,
-                              -1):
+            if facet_positive(X, a, b, cand, cnt[a], half, tol, reach, xa, ya, la, xb, yb, lb,
+                              frame, -1):
                 out[k, 0] = a
                 out[k, 1] = b
                 k += 1
@@ -282,7 +305,7 @@ def scale_of(X):
     return d if d > 0.0 else 1.0
 
 
-def voronoi_neighbours(X, slack=8, scale=None):
+def voronoi_neighbours(X, slack=8, scale=None, reach=math.inf):
     """Build the Voronoi-neighbour lists of distinct points ``X`` (n, 3).
 
     Parameters
@@ -293,6 +316,8 @@ def voronoi_neighbours(X, slack=8, scale=None):
         Spare slots per list, for the edges that removals add.
     scale : float, optional
         Length the facet tolerances are relative to; the bounding-box diagonal by default.
+    reach : float
+        Only facets within this distance of both points count (model units; ``inf``: all).
 
     Returns
     -------
@@ -304,12 +329,13 @@ def voronoi_neighbours(X, slack=8, scale=None):
     edges, how = candidate_edges(X)
     D = scale_of(X) if scale is None else float(scale)
     start, cnt, cap, pool, meta = adjacency.from_edges(n, edges, slack=0)
-    kept = filter_candidates(X, start, cnt, pool, BOX_FACTOR * D, TOL_FACTOR * D)
+    kept = filter_candidates(X, start, cnt, pool, BOX_FACTOR * D, TOL_FACTOR * D, float(reach))
     return adjacency.from_edges(n, kept, slack=slack), how
 
 
 @jit
-def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, link, cand, bufs, lbufs, frame):
+def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand, bufs, lbufs,
+                 frame):
     """Remove ``p`` from the Voronoi-neighbour lists and add the facets its removal opens.
 
     Paper §3.3: "by updating the Voronoi diagram of P" — done exactly and locally. After the
@@ -332,6 +358,10 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, link, cand, bufs,
             b = link[ib]
             if adjacency.contains(start, cnt, pool, a, b):
                 continue
+            if reach < math.inf:  # farther apart than twice the reach: no facet within it
+                dx, dy, dz = X[b, 0] - X[a, 0], X[b, 1] - X[a, 1], X[b, 2] - X[a, 2]
+                if dx * dx + dy * dy + dz * dz >= 4.0 * reach * reach:
+                    continue
             # constraints: the whole former link of p, then the current neighbours of a. Most
             # pairs have no facet, and the points that block one are mostly in the link: first
             # come, the clipped polygon empties after a few constraints.
@@ -341,7 +371,7 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, link, cand, bufs,
                 cand[j] = link[j]
             for j in range(na):
                 cand[k + j] = pool[sa + j]
-            if facet_positive(X, a, b, cand, na + k, half, tol,
+            if facet_positive(X, a, b, cand, na + k, half, tol, reach,
                               bufs[0], bufs[1], lbufs[0], bufs[2], bufs[3], lbufs[1], frame, p):
                 pool = adjacency.append(start, cnt, cap, pool, meta, a, b)
                 pool = adjacency.append(start, cnt, cap, pool, meta, b, a)
