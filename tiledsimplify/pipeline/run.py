@@ -267,13 +267,20 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         # mode "paper": neighbourhoods of every tile (saved for the tile pass), one threshold
         # for all tiles (mode "coverage" flags edges by a fixed candidate angle and a local
         # edge fit: nothing global to find)
+        # one spacing for every tile: the coverage measure's scale and the Voronoi reach
+        spacing = options.spacing
+        if spacing is None and ts.spacing > 0:
+            spacing = ts.spacing
+        if spacing is not None:
+            opts = {**opts, "spacing": spacing}
+
         threshold = options.boundary_threshold
         if threshold is None and options.mode != "paper":
             threshold = edge_fit.CANDIDATE
         if threshold is None:
             threshold = ts.run_attrs.get("threshold")
         if threshold is None and options.detect_boundary and options.mode == "paper":
-            done = _compute([dask.delayed(deviation_histogram)(str(store_path), i)
+            done = _compute([dask.delayed(deviation_histogram)(str(store_path), i, opts)
                              for i in range(ts.n_tiles)], scheduler, workers, client, progress,
                             "neighbours", _threshold_line)
             threshold = threshold_from_histogram(np.sum([d["hist"] for d in done], axis=0),
@@ -283,12 +290,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                      time.perf_counter() - clock[0])
         stage("neighbours")
 
-        # per tile down to the floor; one spacing for the coverage measure of every tile
-        spacing = options.spacing
-        if spacing is None and ts.spacing > 0:
-            spacing = ts.spacing
-        if spacing is not None:
-            opts = {**opts, "spacing": spacing}
+        # per tile down to the floor
         pending = ts.pending_tiles()
         thr = threshold if options.detect_boundary else None
         keep_fraction = float(floor) * target / n if n else 0.0

@@ -46,20 +46,21 @@ def _save_state(store, tile, state, n_points):
     store.write_state(tile, arrays, {"how": how, "n_points": int(n_points)})
 
 
-def _state(store, tile, xyz, frozen):
+def _state(store, tile, xyz, frozen, options):
     """The tile's neighbourhood state: restored from the store, else built and saved there,
     so that no later pass over the tile (the tile pass after the threshold pass, a deeper
     pass) builds it again."""
     saved = store.read_state(tile)
     if saved is not None and saved[1].get("n_points") == len(xyz):
         return Neighbourhoods.from_arrays(saved[0], saved[1]["how"])
-    state, _ = neighbourhood_state(xyz, frozen)
+    state, _ = neighbourhood_state(xyz, frozen, options)
     _save_state(store, tile, state, len(xyz))
     return state
 
 
-def deviation_histogram(store_path, tile):
-    """Threshold pass for one tile: build and save its neighbourhoods (paper steps 1-2), and
+def deviation_histogram(store_path, tile, options):
+    """Threshold pass for one tile: build and save its neighbourhoods (paper steps 1-2; their
+    reach from ``options``, a :class:`SimplifyOptions` dict with the run's spacing), and
     return the histogram (over :data:`BINS`) of its core points' boundary measure.
 
     Returns ``{"tile", "hist", "n_points", "seconds"}`` (``n_points``: core + halo).
@@ -69,7 +70,7 @@ def deviation_histogram(store_path, tile):
     xyz, frozen, n_core = _tile_cloud(store, tile)
     hist = np.zeros(len(BINS) - 1, dtype=np.int64)
     if n_core:
-        state, deviation = neighbourhood_state(xyz, frozen)
+        state, deviation = neighbourhood_state(xyz, frozen, SimplifyOptions(**options))
         _save_state(store, tile, state, len(xyz))
         hist = np.histogram(np.clip(deviation[:n_core], 0.0, BINS[-1]), bins=BINS)[0]
     return {"tile": int(tile), "hist": hist, "n_points": int(len(xyz)),
@@ -152,9 +153,10 @@ def simplify_tile(store_path, tile, options, threshold, depth):
     exhausted, n_steps = True, 0
     known_level = float("-inf")
     if n_core:
-        tile_frozen = _halo_frozen(frozen, SimplifyOptions(**options).mode)
+        tile_options = SimplifyOptions(**options)
+        tile_frozen = _halo_frozen(frozen, tile_options.mode)
         soft = tile_frozen is None
-        state = _state(store, tile, xyz, tile_frozen)
+        state = _state(store, tile, xyz, tile_frozen, tile_options)
         if kind == "keep":
             n_remove = max(n_core - int(value), 0)
             if soft:  # the halo thins with the core: remove the same share of the whole tile
