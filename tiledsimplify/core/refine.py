@@ -198,8 +198,8 @@ def refine_coverage(X, keep, fixed, *, tie=None, step=0.05, min_step=0.002, max_
     if tie is None:
         tie = np.arange(n, dtype=np.uint64)
     info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
-    if not keep.any() or keep.all():
-        return keep, info
+    if not (keep & ~fixed).any() or keep.all():
+        return keep, info  # nothing may go, or nothing to add
     tree_x = cKDTree(X)
     dist, _ = cKDTree(X[keep]).query(X)
     H = float(dist.max())
@@ -215,9 +215,10 @@ def refine_coverage(X, keep, fixed, *, tie=None, step=0.05, min_step=0.002, max_
         tree_c = cKDTree(X[cand])
         d1, o1 = tree_c.query(X)
         rows = np.flatnonzero(removable[o1])  # only these can lose their nearest kept point
-        nd, nbr = tree_c.query(X[rows], k=min(k, cand.size), distance_upper_bound=level)
-        nd = np.ascontiguousarray(nd.reshape(rows.size, -1))
-        nbr = np.ascontiguousarray(nbr.reshape(rows.size, -1), dtype=np.int64)
+        kq = min(k, cand.size)
+        nd, nbr = tree_c.query(X[rows], k=kq, distance_upper_bound=level)
+        nd = np.ascontiguousarray(nd.reshape(rows.size, kq))
+        nbr = np.ascontiguousarray(nbr.reshape(rows.size, kq), dtype=np.int64)
         rev_start, rev = owners_csr(nbr, cand.size + 1)
         gone, d_rows = thin_below(nbr, nd, rev_start, rev, removable,
                                   np.ascontiguousarray(tie[cand], dtype=np.uint64), level,
