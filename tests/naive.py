@@ -179,3 +179,27 @@ def coverage_importance(X, normals, boundary, p, dn, weight):
     e = 0.0 if e == np.inf else e
     rho2 = float(np.mean(np.sum((X[dn] - X[p]) ** 2, axis=1)))
     return e + weight * rho2
+
+
+def thin_below(X, cand, removable, tie, level, n_remove):
+    """Gap thinning (:func:`tiledsimplify.core.refine.thin_below`) by brute force: remove the
+    removable candidate whose removal leaves the farthest input point nearest to it the least
+    far from the other remaining candidates, while that is within ``level``; ties by ``tie``."""
+    alive = np.ones(len(cand), dtype=bool)
+    D = np.linalg.norm(X[:, None, :] - X[cand][None, :, :], axis=2)  # input x candidate
+    removed = []
+    while len(removed) < n_remove:
+        best = None
+        live = np.flatnonzero(alive)
+        own = live[np.argmin(D[:, live], axis=1)]
+        for c in np.flatnonzero(alive & removable):
+            others = live[live != c]
+            mine = own == c
+            gap = D[np.ix_(mine, others)].min(axis=1).max() if mine.any() else 0.0
+            if best is None or (gap, tie[c]) < (best[0], tie[best[1]]):
+                best = (gap, c)
+        if best is None or not best[0] <= level:
+            break
+        alive[best[1]] = False
+        removed.append(best[1])
+    return np.array(removed, dtype=np.int64)

@@ -78,6 +78,14 @@ class SimplifyOptions:
         level — what a tiled run needs to cut all tiles at one level — without the end of the
         sequence, which is the slow part on flat faces (the points around an emptied face
         become Voronoi neighbours of each other). None runs to the end.
+    refine : bool or None
+        After the greedy removal reaches the target, swap kept points for removed ones at equal
+        count while that lowers the Hausdorff distance from the input to the kept set
+        (:mod:`tiledsimplify.core.refine`); boundary, frozen and kept edge-candidate points
+        (deviation above the threshold) are never swapped out. Only the kept set at the
+        requested count is refined: ``order`` and :meth:`SimplifyResult.keep_at` stay the
+        greedy's. None: the mode's default (``"coverage"``: True; ``"paper"``: False). Not
+        applied with a guard, whose veto the swaps would not respect.
     """
 
     mode: str = "coverage"
@@ -94,12 +102,17 @@ class SimplifyOptions:
     max_spacing: float | None = None
     progressive: bool = True
     progressive_until: float | None = None
+    refine: bool | None = None
 
     def __post_init__(self):
         if self.mode not in MODES:
             raise InputError(f"options.mode must be one of {MODES}, got {self.mode!r}.")
         if self.importance is None:
             object.__setattr__(self, "importance", "paper" if self.mode == "paper" else "coverage")
+        if self.refine is None:
+            object.__setattr__(self, "refine", self.mode != "paper")
+        if not isinstance(self.refine, bool):
+            raise InputError(f"options.refine must be True, False or None, got {self.refine!r}.")
         if self.importance not in MEASURES:
             raise InputError(
                 f"options.importance must be one of {tuple(MEASURES)}, got {self.importance!r}.")

@@ -23,6 +23,7 @@ from .importance import MEASURES, all_importance, coverage_weight
 from .local_mesh import MAX_DN, all_local_meshes
 from .normals import all_normals
 from .options import SimplifyOptions
+from .refine import refine_coverage
 from .removal import GUARDS, remove_points
 from .result import SimplifyResult, resolve_target
 from .voronoi import BOX_FACTOR, TOL_FACTOR, scale_of, voronoi_neighbours
@@ -193,6 +194,28 @@ def _options(options):
     if not isinstance(options, SimplifyOptions):
         raise InputError(f"options must be a SimplifyOptions or a dict, got {type(options)}.")
     return options
+
+
+def _swap(keep, rank, importance, rep, keep_u, order, order_importance, cut):
+    """Apply a refined kept set of the representatives (:mod:`.refine`) to ``keep`` in place;
+    returns ``rank`` and ``importance`` renumbered: the greedy's removals that stay removed keep
+    their relative order, the points swapped out follow them (with their importance in the
+    progressive order where it reached them, else NaN)."""
+    out = rep[keep[rep] & ~keep_u]
+    back = rep[~keep[rep] & keep_u]
+    keep[out] = False
+    keep[back] = True
+    n = keep.size
+    pos = np.full(n, order.size, dtype=np.int64)
+    pos[order] = np.arange(order.size)
+    removed = order[:cut][~keep[order[:cut]]]
+    removed = np.concatenate([removed, out[np.argsort(pos[out], kind="stable")]])
+    rank = np.full(n, -1, dtype=np.int64)
+    rank[removed] = np.arange(removed.size)
+    at = np.append(order_importance, np.nan)
+    importance = np.full(n, np.nan)
+    importance[removed] = at[pos[removed]]
+    return rank, importance
 
 
 def _prepare(X, frozen):
@@ -380,6 +403,13 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     rank[order[:cut]] = np.arange(cut)
     importance = np.full(n, np.nan)
     importance[order[:cut]] = order_importance[:cut]
+    if options.refine and options.guard == "none" and cut == n_remove and to_target > 0:
+        fixed_u = boundary_u | frozen[rep] | (deviation_u > threshold)
+        keep_u, info = refine_coverage(Xu, keep[rep], fixed_u, tie=tie)
+        rank, importance = _swap(keep, rank, importance, rep, keep_u, order, order_importance,
+                                 cut)
+        stats.update({f"refine_{key}": value for key, value in info.items()})
+        lap("refine")
     message = ""
     if cut < n_remove:
         n_b = int(boundary.sum())

@@ -113,8 +113,8 @@ def simplify_tile(store_path, tile, options, threshold, depth):
     store_path : str
     tile : int
     options : dict
-        :class:`SimplifyOptions` fields (``progressive`` and ``progressive_until`` are set
-        here).
+        :class:`SimplifyOptions` fields (``progressive``, ``progressive_until`` and
+        ``refine`` are set here).
     threshold : float or None
         The global boundary threshold.
     depth : ("keep", k) or ("level", L)
@@ -171,6 +171,7 @@ def simplify_tile(store_path, tile, options, threshold, depth):
         else:
             raise InputError(f"depth must be ('keep', count) or ('level', value), got {depth!r}")
         opts["boundary_threshold"] = threshold
+        opts["refine"] = False  # only the order is used here; the kept set is the global cut's
         res = simplify_points(xyz, count=count, frozen=tile_frozen,
                               options=SimplifyOptions(**opts), state=state)
         n_all = int(res.order.size)

@@ -1,0 +1,126 @@
+"""Gap refinement (core/refine.py): exact count, fixed points kept, Hausdorff never up."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from tiledsimplify import SimplifyOptions, simplify_points
+from tiledsimplify.core.heap import coordinate_hash
+from tiledsimplify.core.refine import owners_csr, refine_coverage, thin_below
+
+import naive
+
+
+def _hausdorff(X, keep):
+    return float(cKDTree(X[keep]).query(X)[0].max())
+
+
+def _wavy(n, seed=0):
+    rng = np.random.default_rng(seed)
+    xy = rng.random((n, 2)) * 3
+    return np.c_[xy, 0.4 * np.sin(2 * xy[:, 0]) * np.cos(1.5 * xy[:, 1])]
+
+
+def _plate(n, seed=0):
+    """Uniform random samples of a 1 x 1 plate (area 1)."""
+    return np.c_[np.random.default_rng(seed).random((n, 2)), np.zeros(n)]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_thin_below_matches_naive(seed):
+    rng = np.random.default_rng(seed)
+    X = _wavy(150, seed)
+    cand = np.sort(rng.choice(150, 50, replace=False))
+    removable = rng.random(50) < 0.7
+    tie = coordinate_hash(X[cand])
+    nd, nbr = cKDTree(X[cand]).query(X, k=cand.size)  # full lists: no search cut-off
+    rev_start, rev = owners_csr(np.ascontiguousarray(nbr, dtype=np.int64), cand.size + 1)
+    d1 = nd[:, 0]
+    for level in (np.quantile(d1, 0.9) * 1.5, np.max(d1) * 3):
+        gone, dist = thin_below(np.ascontiguousarray(nbr, dtype=np.int64), nd, rev_start, rev,
+                                removable, tie, level, 30)
+        expect = naive.thin_below(X, cand, removable, tie, level, 30)
+        assert gone.tolist() == expect.tolist()
+        alive = np.ones(cand.size, bool)
+        alive[gone] = False
+        np.testing.assert_allclose(dist, cKDTree(X[cand[alive]]).query(X)[0])
+        assert dist.max() <= max(level, d1.max())
+
+
+def test_owners_csr_lists_every_row_once_per_mention():
+    nbr = np.array([[0, 2], [2, 1], [1, 3]], dtype=np.int64)
+    start, rev = owners_csr(nbr, 4)
+    assert [rev[start[c]:start[c + 1]].tolist() for c in range(4)] == [[0], [1, 2], [0, 1], [2]]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_exact_count_fixed_kept_and_hausdorff_never_up(seed):
+    rng = np.random.default_rng(seed)
+    X = _wavy(3000, seed)
+    keep = rng.random(3000) < 0.15
+    keep[X[:, 0] < 1.0] &= rng.random(3000)[X[:, 0] < 1.0] < 0.3  # a sparse side: big gaps
+    fixed = keep & (rng.random(3000) < 0.3)
+    out, info = refine_coverage(X, keep, fixed)
+    assert out.sum() == keep.sum()
+    assert out[fixed].all()
+    before, after = _hausdorff(X, keep), _hausdorff(X, out)
+    assert after <= before
+    assert info["hausdorff_before"] == pytest.approx(before)
+    assert info["hausdorff_after"] == pytest.approx(after)
+    assert after < 0.9 * before  # a random subset has gaps worth filling
+    assert info["swaps"] > 0
+
+
+def test_everything_fixed_changes_nothing():
+    X = _wavy(500)
+    keep = np.random.default_rng(0).random(500) < 0.2
+    out, info = refine_coverage(X, keep, keep)
+    assert np.array_equal(out, keep) and info["swaps"] == 0
+
+
+def test_plate_at_ten_percent_near_ideal_covering():
+    """On a uniformly sampled plate at 10 %, the refined Hausdorff distance is within 1.3x the
+    covering radius of a hexagonal lattice with as many points (the densest covering)."""
+    X = _plate(5000)
+    count = 500
+    ideal = np.sqrt(2.0 / (3.0 * np.sqrt(3.0) * count))  # hexagonal covering radius, area 1
+    on = simplify_points(X, count=count)
+    off = simplify_points(X, count=count, options=SimplifyOptions(refine=False))
+    h_on, h_off = _hausdorff(X, on.keep), _hausdorff(X, off.keep)
+    assert h_on <= h_off
+    assert h_on < 1.3 * ideal
+
+
+def test_simplify_points_refined_result_is_consistent():
+    X = _wavy(4000, seed=5)
+    res = simplify_points(X, ratio=0.1)
+    greedy = simplify_points(X, ratio=0.1, options=SimplifyOptions(refine=False))
+    assert res.count == res.target == 400
+    assert res.keep[res.boundary].all()
+    assert res.stats["refine_swaps"] > 0
+    assert not np.array_equal(res.keep, greedy.keep)
+    assert _hausdorff(X, res.keep) <= _hausdorff(X, greedy.keep)
+    # rank: a permutation of the removals, -1 exactly on kept points
+    assert np.array_equal(res.rank >= 0, ~res.keep)
+    assert np.array_equal(np.sort(res.rank[~res.keep]), np.arange(4000 - 400))
+    assert np.isnan(res.importance[res.keep]).all()
+    # the progressive order stays the greedy's: keep_at is the unrefined set
+    assert np.array_equal(res.order, greedy.order)
+    assert np.array_equal(res.keep_at(count=400), greedy.keep)
+
+
+def test_paper_mode_and_guard_are_not_refined():
+    X = _wavy(2000)
+    res = simplify_points(X, ratio=0.2, options=SimplifyOptions(mode="paper"))
+    assert "refine_swaps" not in res.stats
+    res = simplify_points(X, ratio=0.2, options=SimplifyOptions(guard="max_spacing",
+                                                               max_spacing=1.0))
+    assert "refine_swaps" not in res.stats
+
+
+def test_refine_option_validated():
+    from tiledsimplify.errors import InputError
+    with pytest.raises(InputError, match="refine"):
+        SimplifyOptions(refine="yes")
+    assert SimplifyOptions().refine is True
+    assert SimplifyOptions(mode="paper").refine is False

@@ -1,0 +1,236 @@
+"""Gap refinement: swaps at equal count that lower the Hausdorff distance (beyond the paper).
+
+The greedy removal (:mod:`.removal`) decides each step on local information, so the kept set
+it reaches can leave a few holes wider than a farthest-point sample of the same size would
+(issue 5: Hausdorff 1.3–2× farthest point sampling's). This pass takes the kept set at the
+requested count and trades points, keeping the count exact and every fixed (boundary, frozen)
+point:
+
+1. ``H`` = the Hausdorff distance from the input to the kept set (the largest distance from an
+   input point to its nearest kept point); aim at a level ``τ = (1 − step) · H``.
+2. **Fill**: add back input points, farthest first (as farthest point sampling does), until
+   every input point lies within ``τ`` of the kept set; say ``a`` were added.
+3. **Thin**: remove ``a`` kept points that are neither fixed nor just added, each only if every
+   input point it is the nearest kept point of has another kept point within ``τ`` — so the
+   bound ``τ`` survives every removal. Candidates go in order of ``priority`` (lowest first;
+   default: the gap their removal would open, smallest first, as in sample elimination).
+4. If ``a`` removals were found, commit the swap and aim lower; otherwise halve ``step`` and
+   try again, and stop when it falls below ``min_step`` or after ``max_rounds`` tries.
+
+Every committed round lowers the Hausdorff distance by at least ``min_step · H``; a failed one
+changes nothing. So the result never has a larger Hausdorff distance than the input kept set.
+
+Nearest kept points are searched among each input point's ``k`` nearest candidates (kd-tree,
+``scipy.spatial.cKDTree``); a point with no candidate left among them counts as uncovered, so a
+removal that would need a farther one is refused (never wrongly allowed).
+"""
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from . import heap
+from ._jit import jit
+
+
+@jit
+def _first_alive(row, alive, j):
+    """Index of the first ``alive`` candidate in ``row`` at or after ``j`` (-1: none)."""
+    while j < row.size:
+        if alive[row[j]]:
+            return j
+        j += 1
+    return -1
+
+
+@jit
+def _gap(c, nbr, nd, owner, alive, rev_start, rev):
+    """The largest distance an input point owned by ``c`` would have to its next candidate if
+    ``c`` were removed (inf if one has none among its ``k``)."""
+    worst = 0.0
+    for t in range(rev_start[c], rev_start[c + 1]):
+        x = rev[t]
+        j = owner[x]
+        if j < 0 or nbr[x, j] != c:
+            continue
+        nxt = _first_alive(nbr[x], alive, j + 1)
+        if nxt < 0:
+            return np.inf
+        if nd[x, nxt] > worst:
+            worst = nd[x, nxt]
+    return worst
+
+
+@jit
+def thin_below(nbr, nd, rev_start, rev, removable, tie, level, n_remove):
+    """Remove up to ``n_remove`` candidates, smallest gap first, never leaving an input point
+    farther than ``level`` from its nearest remaining candidate.
+
+    ``nbr`` / ``nd`` (r, k): for the input points that may change owner, their ``k`` nearest
+    candidates (ids into the candidate set, nearest first; id ``m`` and distance inf where
+    fewer lie within the search radius) and the distances; ``rev_start`` /
+    ``rev`` (CSR): for every candidate the rows that list it. ``removable`` (m,) marks the
+    candidates that may go; ``tie`` (uint64, m) breaks equal gaps. The gap of a candidate is
+    the largest distance a row it owns would have to its next candidate; gaps only grow as
+    candidates go, so the queue is kept up to date lazily.
+
+    Returns
+    -------
+    removed : int64
+        The removed candidates, in order.
+    dist : float64 (r,)
+        Each row's distance to its nearest remaining candidate (inf if none is left among
+        its ``k``; cannot happen to a row that started with one within ``level``).
+    """
+    r, k = nbr.shape
+    m = removable.size
+    alive = np.ones(m + 1, dtype=np.bool_)
+    alive[m] = False  # id m: no candidate (beyond the search radius)
+    owner = np.zeros(r, dtype=np.int64)
+    key = np.zeros(m)
+    items = np.nonzero(removable)[0]
+    for c in items:
+        key[c] = _gap(c, nbr, nd, owner, alive, rev_start, rev)
+    hp, pos = heap.new(m)
+    size = heap.build(hp, pos, key, tie, items)
+    out = np.empty(min(n_remove, items.size), dtype=np.int64)
+    done = 0
+    while done < out.size and size > 0:
+        c = hp[0]
+        g = _gap(c, nbr, nd, owner, alive, rev_start, rev)
+        if g > key[c]:  # stale: the gap grew since it was queued
+            heap.update(hp, pos, key, tie, c, g, size)
+            continue
+        if not g <= level:
+            break  # every other gap is at least as large
+        heap.pop(hp, pos, key, tie, size)
+        size -= 1
+        alive[c] = False
+        out[done] = c
+        done += 1
+        for t in range(rev_start[c], rev_start[c + 1]):
+            x = rev[t]
+            if owner[x] >= 0 and nbr[x, owner[x]] == c:
+                owner[x] = _first_alive(nbr[x], alive, owner[x] + 1)
+    dist = np.empty(r)
+    for x in range(r):
+        dist[x] = nd[x, owner[x]] if owner[x] >= 0 else np.inf
+    return out[:done], dist
+
+
+@jit
+def owners_csr(nbr, m):
+    """For each of ``m`` candidates, the input points whose list ``nbr`` (n, k) names it
+    (CSR: ``rev[rev_start[c]:rev_start[c + 1]]``, ascending), by a counting sort."""
+    n, k = nbr.shape
+    rev_start = np.zeros(m + 1, dtype=np.int64)
+    for x in range(n):
+        for j in range(k):
+            rev_start[nbr[x, j] + 1] += 1
+    for c in range(m):
+        rev_start[c + 1] += rev_start[c]
+    fill = rev_start[:m].copy()
+    rev = np.empty(n * k, dtype=np.int64)
+    for x in range(n):
+        for j in range(k):
+            c = nbr[x, j]
+            rev[fill[c]] = x
+            fill[c] += 1
+    return rev_start, rev
+
+
+def _fill(X, tree_x, dist, level):
+    """Input points to add, farthest first, until all of ``dist`` is within ``level``
+    (``dist`` is updated in place)."""
+    added = []
+    while True:
+        x = int(np.argmax(dist))
+        r = dist[x]
+        if not r > level:
+            return np.asarray(added, dtype=np.int64)
+        added.append(x)
+        near = np.asarray(tree_x.query_ball_point(X[x], r), dtype=np.int64)
+        if near.size:
+            d = np.linalg.norm(X[near] - X[x], axis=1)
+            np.minimum.at(dist, near, d)
+        dist[x] = 0.0
+
+
+def refine_coverage(X, keep, fixed, *, tie=None, step=0.05, min_step=0.002, max_rounds=60,
+                    k=16):
+    """Swap kept points at equal count so that the Hausdorff distance to the input drops.
+
+    Parameters
+    ----------
+    X : float64 (n, 3)
+        The input points (distinct).
+    keep : bool (n,)
+        The kept set to refine.
+    fixed : bool (n,)
+        Kept points that must stay (boundary and frozen points); ``fixed & ~keep`` is ignored.
+    tie : uint64 (n,), optional
+        Tie-breaker of equal gaps (default: the point index; the core passes
+        :func:`.heap.coordinate_hash`).
+    step, min_step : float
+        Each round aims at ``(1 − step) ×`` the current Hausdorff distance; a failed round
+        halves ``step``; the pass stops below ``min_step``.
+    max_rounds : int
+        Upper bound on rounds, committed or failed.
+    k : int
+        Kept points searched per input point when thinning.
+
+    Returns
+    -------
+    keep : bool (n,)
+        The refined kept set: same count, every kept ``fixed`` point still kept.
+    info : dict
+        ``hausdorff_before``, ``hausdorff_after`` (model units), ``rounds``, ``swaps``.
+
+    Notes
+    -----
+    Cost per round: a kd-tree over the kept set, a nearest query of every input point and a
+    ``k``-nearest query of those whose nearest kept point may go (O(n log n)); one ball query
+    per added point; an indexed heap over the kept points. ~0.3 s for 16k points at 20 %.
+    """
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    keep = np.asarray(keep, dtype=bool).copy()
+    fixed = np.asarray(fixed, dtype=bool) & keep
+    n = X.shape[0]
+    if tie is None:
+        tie = np.arange(n, dtype=np.uint64)
+    info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
+    if not (keep & ~fixed).any() or keep.all():
+        return keep, info  # nothing may go, or nothing to add
+    tree_x = cKDTree(X)
+    dist, _ = cKDTree(X[keep]).query(X)
+    H = float(dist.max())
+    info["hausdorff_before"] = H
+    while info["rounds"] < max_rounds and step >= min_step and H > 0:
+        info["rounds"] += 1
+        level = (1.0 - step) * H
+        trial = dist.copy()
+        added = _fill(X, tree_x, trial, level)
+        cand = np.concatenate([np.flatnonzero(keep), added])
+        removable = ~fixed[cand]
+        removable[cand.size - added.size:] = False
+        tree_c = cKDTree(X[cand])
+        d1, o1 = tree_c.query(X)
+        rows = np.flatnonzero(removable[o1])  # only these can lose their nearest kept point
+        kq = min(k, cand.size)
+        nd, nbr = tree_c.query(X[rows], k=kq, distance_upper_bound=level)
+        nd = np.ascontiguousarray(nd.reshape(rows.size, kq))
+        nbr = np.ascontiguousarray(nbr.reshape(rows.size, kq), dtype=np.int64)
+        rev_start, rev = owners_csr(nbr, cand.size + 1)
+        gone, d_rows = thin_below(nbr, nd, rev_start, rev, removable,
+                                  np.ascontiguousarray(tie[cand], dtype=np.uint64), level,
+                                  added.size)
+        if gone.size < added.size:
+            step *= 0.5
+            continue
+        keep[added] = True
+        keep[cand[gone]] = False
+        info["swaps"] += int(added.size)
+        d1[rows] = d_rows
+        dist = d1
+        H = float(dist.max())
+    info["hausdorff_after"] = H
+    return keep, info
