@@ -279,6 +279,30 @@ def summary(results):
     return "\n".join(lines)
 
 
+def merge_results(runs):
+    """Cases of several ``--json`` runs, later runs first: a case run again replaces the rows
+    of the methods it ran (per method and count group) and keeps the others — so our modes can
+    be re-run alone (``--skip all``) and shown beside the peers of an earlier run."""
+    by_case = {}
+    for run in runs:
+        for r in run:
+            for row in r["rows"]:
+                row["method"] = RENAMED.get(row["method"], row["method"])
+            old = by_case.get(r["case"])
+            if old is None:
+                by_case[r["case"]] = r
+                continue
+            new = {(row["method"], row["group"]) for row in r["rows"]}
+            replaced = {row["method"] for row in r["rows"]}
+            rows = [row for row in old["rows"] if row["method"] not in replaced
+                    and (row["method"], row["group"]) not in new]
+            merged = {**old, **{k: v for k, v in r.items() if k not in ("rows", "counts")}}
+            merged["rows"] = r["rows"] + rows
+            merged["counts"] = sorted(set(old["counts"]) | set(r["counts"]))
+            by_case[r["case"]] = merged
+    return list(by_case.values())
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--cases", default=None,
@@ -286,7 +310,10 @@ def main(argv=None):
     p.add_argument("--quick", action="store_true", help="only " + ", ".join(QUICK))
     p.add_argument("--list", action="store_true", help="print the case names and exit")
     p.add_argument("--only", default=None, help="comma-separated peer names to run")
-    p.add_argument("--skip", default="", help="comma-separated peer names to leave out")
+    p.add_argument("--skip", default="", help="comma-separated peer names to leave out "
+                   "('all': no peers, e.g. to re-run our modes and merge with --from-json)")
+    p.add_argument("--modes", default=None,
+                   help="comma-separated modes of ours to run (default: every mode)")
     p.add_argument("--cad-points", type=int, default=20_000,
                    help="points of the evenly sampled / scanned CAD parts (default 20000)")
     p.add_argument("--lidar-points", type=int, default=None,
@@ -296,13 +323,7 @@ def main(argv=None):
                    help="print the tables and the summary of earlier --json runs; run nothing")
     args = p.parse_args(argv)
     if args.from_json:
-        by_case = {}  # a case run again in a later file replaces the earlier one
-        for f in args.from_json:
-            for r in json.loads(Path(f).read_text()):
-                for row in r["rows"]:
-                    row["method"] = RENAMED.get(row["method"], row["method"])
-                by_case[r["case"]] = r
-        results = list(by_case.values())
+        results = merge_results(json.loads(Path(f).read_text()) for f in args.from_json)
         for res in results:
             print(table(res))
         print("### Summary: ours against the best peer at the same count\n")
@@ -325,8 +346,15 @@ def main(argv=None):
         p.error(f"unknown case(s) {unknown}; --list shows the cases")
     only = set(args.only.split(",")) if args.only else None
     skip = {s.strip() for s in args.skip.split(",") if s.strip()}
-    methods = {k: v for k, v in peers.available(only).items() if k not in skip}
+    methods = {} if "all" in skip else {k: v for k, v in peers.available(only).items()
+                                          if k not in skip}
     ours = peers.our_methods()
+    if args.modes:
+        modes = [m.strip() for m in args.modes.split(",")]
+        unknown = [m for m in modes if f"tiledsimplify {m}" not in ours]
+        if unknown:
+            p.error(f"unknown mode(s) {unknown}; modes: {[k.split()[1] for k in ours]}")
+        ours = {f"tiledsimplify {m}": ours[f"tiledsimplify {m}"] for m in modes}
 
     from tiledsimplify import simplify_points, synthetic
     from tiledsimplify.io import read_mesh
