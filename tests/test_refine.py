@@ -71,6 +71,30 @@ def test_exact_count_fixed_kept_and_hausdorff_never_up(seed):
     assert info["swaps"] > 0
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_points_not_addable_are_never_added_and_do_not_count(seed):
+    # a tile's view: the right part is another tile's core, whose removed points take no part
+    rng = np.random.default_rng(seed)
+    X = _wavy(3000, seed)
+    keep = rng.random(3000) < 0.15
+    keep[X[:, 0] < 1.0] &= rng.random(3000)[X[:, 0] < 1.0] < 0.3
+    other = X[:, 0] > 2.0
+    addable = ~other
+    out, info = refine_coverage(X, keep, other, addable=addable)
+    assert out.sum() == keep.sum()
+    assert np.array_equal(out[other], keep[other])  # neither added nor removed there
+    counted = keep | addable
+    before = float(cKDTree(X[keep]).query(X[counted])[0].max())
+    after = float(cKDTree(X[out]).query(X[counted])[0].max())
+    assert info["hausdorff_before"] == pytest.approx(before)
+    assert info["hausdorff_after"] == pytest.approx(after)
+    assert after < 0.9 * before and info["swaps"] > 0
+    # with every point addable the default is unchanged
+    a, _ = refine_coverage(X, keep, other)
+    b, _ = refine_coverage(X, keep, other, addable=np.ones(3000, dtype=bool))
+    assert np.array_equal(a, b)
+
+
 def test_everything_fixed_changes_nothing():
     X = _wavy(500)
     keep = np.random.default_rng(0).random(500) < 0.2

@@ -155,8 +155,8 @@ def _fill(X, tree_x, dist, level):
         dist[x] = 0.0
 
 
-def refine_coverage(X, keep, fixed, *, tie=None, step=0.05, min_step=0.002, max_rounds=60,
-                    k=16):
+def refine_coverage(X, keep, fixed, *, addable=None, tie=None, step=0.05, min_step=0.002,
+                    max_rounds=60, k=16):
     """Swap kept points at equal count so that the Hausdorff distance to the input drops.
 
     Parameters
@@ -167,6 +167,10 @@ def refine_coverage(X, keep, fixed, *, tie=None, step=0.05, min_step=0.002, max_
         The kept set to refine.
     fixed : bool (n,)
         Kept points that must stay (boundary and frozen points); ``fixed & ~keep`` is ignored.
+    addable : bool (n,), optional
+        Points that may be added (default: all). A point neither kept nor addable takes no
+        part: it is never added and its distance does not count (a tile's removed halo
+        points, which another tile owns). The Hausdorff distance is over ``keep | addable``.
     tie : uint64 (n,), optional
         Tie-breaker of equal gaps (default: the point index; the core passes
         :func:`.heap.coordinate_hash`).
@@ -195,13 +199,16 @@ def refine_coverage(X, keep, fixed, *, tie=None, step=0.05, min_step=0.002, max_
     keep = np.asarray(keep, dtype=bool).copy()
     fixed = np.asarray(fixed, dtype=bool) & keep
     n = X.shape[0]
+    addable = np.ones(n, dtype=bool) if addable is None else np.asarray(addable, dtype=bool)
+    ignored = ~(keep | addable)  # stays so: only addable points are ever added
     if tie is None:
         tie = np.arange(n, dtype=np.uint64)
     info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
-    if not (keep & ~fixed).any() or keep.all():
+    if not (keep & ~fixed).any() or not (addable & ~keep).any():
         return keep, info  # nothing may go, or nothing to add
     tree_x = cKDTree(X)
     dist, _ = cKDTree(X[keep]).query(X)
+    dist[ignored] = 0.0
     H = float(dist.max())
     info["hausdorff_before"] = H
     while info["rounds"] < max_rounds and step >= min_step and H > 0:
@@ -214,7 +221,8 @@ def refine_coverage(X, keep, fixed, *, tie=None, step=0.05, min_step=0.002, max_
         removable[cand.size - added.size:] = False
         tree_c = cKDTree(X[cand])
         d1, o1 = tree_c.query(X)
-        rows = np.flatnonzero(removable[o1])  # only these can lose their nearest kept point
+        d1[ignored] = 0.0
+        rows = np.flatnonzero(removable[o1] & ~ignored)  # only these can lose their nearest
         kq = min(k, cand.size)
         nd, nbr = tree_c.query(X[rows], k=kq, distance_upper_bound=level)
         nd = np.ascontiguousarray(nd.reshape(rows.size, kq))

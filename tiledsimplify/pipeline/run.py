@@ -2,7 +2,8 @@
 
     input → tile store (zarr: count-balanced tiles, halos) → neighbourhoods of every tile and
     one global boundary threshold → per-tile simplification with the halo frozen, down to a
-    floor (dask) → one global budget (tiles it reaches past their floor run deeper) → output
+    floor (dask) → one global budget (tiles it reaches past their floor run deeper) → gap
+    refinement of every tile's kept points at the cut (mode "coverage") → output
 
 Stages are resumable: an existing, complete store for the same input and settings is reused,
 finished tiles are not recomputed, and the output is rewritten from the stored results.
@@ -30,6 +31,7 @@ from ..io.points_out import write_points
 from ..io.sources import open_source
 from ..tiles import TileStore
 from .budget import deeper_tiles, global_cut, kept_in_tile, store_sequences
+from .tile_refine import cut_hausdorff, is_refined, refine_tile
 from .tile_task import deviation_histogram, simplify_tile, threshold_from_histogram
 
 log = logging.getLogger("tiledsimplify")
@@ -40,7 +42,7 @@ SCHEDULERS = ("threads", "processes", "synchronous")
 @dataclass
 class RunSummary:
     """What a run did: counts, the boundary threshold and point spacing used, tiles run
-    deeper, seconds per stage.
+    deeper, whether the kept points were refined after the global cut, seconds per stage.
 
     ``seconds``: wall time per stage and ``total``; ``cpu_seconds``: CPU time of this process
     per stage (all its threads; not the work of other processes or cluster workers).
@@ -58,6 +60,7 @@ class RunSummary:
     output: str
     reached: bool
     message: str = ""
+    refined: bool = False
     seconds: dict = field(default_factory=dict)
     cpu_seconds: dict = field(default_factory=dict)
 
@@ -157,6 +160,13 @@ def _tile_line(result, done, total):
              result["n_boundary"], result["steps"],
              " (all)" if result["exhausted"] else f" (up to level {result['level']:.3g})",
              result["seconds"])
+
+
+def _refine_line(result, done, total):
+    log.info("refined tile %d (%d/%d): %d core + %d halo points, %d kept fixed, %d swaps, "
+             "Hausdorff %.4g -> %.4g, %.1f s", result["tile"], done, total, result["n_core"],
+             result["n_halo"], result["n_fixed"], result["swaps"], result["hausdorff_before"],
+             result["hausdorff_after"], result["seconds"])
 
 
 def _threshold_line(result, done, total):
@@ -328,7 +338,11 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         for i in range(ts.n_tiles):  # the saved neighbourhoods are no longer needed
             ts.delete_state(i)
         stage("budget")
-        n_out, n_boundary = _write_output(ts, source, output, prefix)
+        refined = False
+        if options.refine and options.guard == "none" and 0 < n_removed == n - target:
+            refined = _refine(ts, store_path, prefix, scheduler, workers, client, progress)
+        stage("refine")
+        n_out, n_boundary = _write_output(ts, source, output, prefix, refined)
         stage("output")
     finally:
         if tmp is not None:
@@ -346,7 +360,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          spacing=float(spacing or float("nan")),
                          n_deeper=n_deeper,
                          store=str(store_path) if tmp is None else "", output=str(output),
-                         reached=reached, message=message, seconds=seconds,
+                         reached=reached, message=message, refined=refined, seconds=seconds,
                          cpu_seconds=cpu_seconds)
     log.info("kept %d of %d points (%d boundary) from %d tiles (%d run deeper) in %.1f s "
              "(%.0f input points/s): %s", n_out, n, n_boundary, ts.n_tiles, n_deeper,
@@ -355,18 +369,54 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     return summary
 
 
-def _kept(ts, tile, prefix):
-    return kept_in_tile(ts, tile, prefix), ts.read_result(tile, "boundary")
+def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
+    """The gap refinement stage (:mod:`.tile_refine`); True if the tiles were refined.
+
+    Two passes of one task per tile: the cut's Hausdorff distance per tile (their maximum is
+    the band near tile faces where nothing is removed), then the refinement. The cut, its key
+    and the band are saved in the store, and each tile's refined flags with the key and band,
+    so a resumed run refines only the tiles still missing for this cut.
+    """
+    t0 = time.perf_counter()
+    cut = [int(prefix[i]) for i in range(ts.n_tiles)]
+    key = hashlib.sha256(json.dumps(cut).encode()).hexdigest()[:20]
+    if ts.run_attrs.get("cut_key") != key:
+        ts.set_run_attrs({"cut": cut, "cut_key": key, "band": None})
+    band = ts.run_attrs.get("band")
+    if band is None:
+        done = _compute([dask.delayed(cut_hausdorff)(str(store_path), i)
+                         for i in range(ts.n_tiles)], scheduler, workers, client, progress,
+                        "gaps")
+        band = max(d["hausdorff"] for d in done)
+        if not band <= ts.halo:
+            log.warning("no gap refinement: the cut leaves points %.4g from the nearest kept "
+                        "point, farther than the halo (%.4g); give a wider --halo to refine",
+                        band, ts.halo)
+            return False
+        ts.set_run_attrs({"band": band})
+    pending = [i for i in range(ts.n_tiles) if not is_refined(ts, i, key, band)]
+    if pending:
+        _compute([dask.delayed(refine_tile)(str(store_path), i, band) for i in pending],
+                 scheduler, workers, client, progress, "refine", _refine_line)
+    log.info("refined %d tiles (band %.4g) in %.1f s", len(pending), band,
+             time.perf_counter() - t0)
+    return True
 
 
-def _write_output(ts, source, output, prefix):
-    """Write the kept core points of every tile, tile by tile (memory bounded by a tile)."""
+def _kept(ts, tile, prefix, refined):
+    keep = ts.read_refined(tile)[0] if refined else kept_in_tile(ts, tile, prefix)
+    return keep, ts.read_result(tile, "boundary")
+
+
+def _write_output(ts, source, output, prefix, refined=False):
+    """Write the kept core points of every tile, tile by tile (memory bounded by a tile):
+    the refined flags if ``refined``, else the cut's."""
     n_out = n_boundary = 0
     if output.suffix.lower() in (".las", ".laz"):
         from ..io.las import LasOutput
         with LasOutput(output, source.template_header()) as out:
             for i in range(ts.n_tiles):
-                keep, boundary = _kept(ts, i, prefix)
+                keep, boundary = _kept(ts, i, prefix, refined)
                 if not keep.any():
                     continue
                 xyz, _ = ts.core(i)
@@ -381,7 +431,7 @@ def _write_output(ts, source, output, prefix):
         return n_out, n_boundary
     parts, flags, normals, index = [], [], [], []
     for i in range(ts.n_tiles):
-        keep, boundary = _kept(ts, i, prefix)
+        keep, boundary = _kept(ts, i, prefix, refined)
         xyz, idx = ts.core(i)
         parts.append(xyz[keep])
         flags.append(boundary[keep])

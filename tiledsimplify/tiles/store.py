@@ -11,6 +11,8 @@ Layout of the store directory (a zarr v3 group)::
                                                    set true only after all its arrays are written
     tiles/<id>/state/<name>        any shape       scratch state one pass leaves for the next
                                                    (:meth:`TileStore.write_state`), same rule
+    tiles/<id>/refined/kept        bool (k,)       final kept flags after the global cut
+                                                   (:meth:`TileStore.write_refined`), same rule
 
 Root attributes: ``format``/``format_version``, ``complete`` (false until the ingest has
 finished), ``plan`` (:meth:`TilePlan.to_dict`), ``halo``, ``halo_is_default``, ``spacing``,
@@ -781,7 +783,8 @@ class TileStore:
         t = self._tile(tile)
         return self._array(t, "xyz")[:], self._array(t, "index")[:]
 
-    def halo_points(self, tile: int, halo: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def halo_points(self, tile: int, halo: float | None = None, *,
+                    owners: bool = False) -> tuple[np.ndarray, ...]:
         """Read the points of other tiles that lie within ``halo`` of this tile's box.
 
         The test is the expanded box: a point ``p`` of another tile is returned when
@@ -794,26 +797,36 @@ class TileStore:
         tile : int
         halo : float, optional
             Defaults to the store's :attr:`halo`.
+        owners : bool, default False
+            Also return where each point is stored: its tile and its row in that tile's
+            core (so a result of that tile can be looked up).
 
         Returns
         -------
         xyz : ndarray of float64, shape (h, 3)
         index : ndarray of int64, shape (h,)
             Sorted by global index.
+        owner, row : ndarray of int64, shape (h,)
+            Only with ``owners``: ``core(owner[p])`` holds point ``p`` at ``row[p]``.
         """
         t = self._tile(tile)
         h = self.halo if halo is None else float(halo)
         lo, hi = self.plan.lo[t] - h, self.plan.hi[t] + h
         xs, js = [np.zeros((0, 3))], [np.zeros(0, dtype=np.int64)]
+        ts, rs = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
         for j in self.plan.neighbours(t, h):
             if not self.tile_counts[j]:
                 continue
             xyz, idx = self.core(j)
-            sel = ((xyz >= lo) & (xyz <= hi)).all(axis=1)
+            sel = np.flatnonzero(((xyz >= lo) & (xyz <= hi)).all(axis=1))
             xs.append(xyz[sel])
             js.append(idx[sel])
+            ts.append(np.full(sel.size, j, dtype=np.int64))
+            rs.append(sel.astype(np.int64))
         xyz, idx = np.concatenate(xs), np.concatenate(js)
         order = np.argsort(idx, kind="stable")
+        if owners:
+            return xyz[order], idx[order], np.concatenate(ts)[order], np.concatenate(rs)[order]
         return xyz[order], idx[order]
 
     def attrs(self, tile: int, names: Iterable[str] | None = None) -> dict[str, np.ndarray]:
@@ -944,11 +957,18 @@ class TileStore:
         the tile's points). Like results, the state counts only once all arrays are written;
         an earlier state is replaced.
         """
-        t = self._tile(tile)
+        self._write_group(self._tile(tile), "state", arrays, attrs)
+
+    def read_state(self, tile: int) -> tuple[dict[str, np.ndarray], dict] | None:
+        """A tile's state saved by :meth:`write_state`: ``(arrays, attrs)``, or None."""
+        return self._read_group(self._tile(tile), "state")
+
+    def _write_group(self, t: int, group: str, arrays: Mapping[str, Any],
+                     attrs: Mapping[str, Any] | None) -> None:
         tg = zarr.open_group(self._store, path=f"tiles/{t}", mode="r+")
-        if "state" in tg:
-            del tg["state"]
-        sg = tg.create_group("state", attributes={"done": False})
+        if group in tg:
+            del tg[group]
+        sg = tg.create_group(group, attributes={"done": False})
         for name, arr in arrays.items():
             arr = np.ascontiguousarray(arr)
             rows = max(1, (1 << 20) // max(1, arr[:1].nbytes))
@@ -957,15 +977,32 @@ class TileStore:
         sg.update_attributes({"attrs": json.loads(json.dumps(dict(attrs or {}))),
                               "names": list(arrays), "done": True})
 
-    def read_state(self, tile: int) -> tuple[dict[str, np.ndarray], dict] | None:
-        """A tile's state saved by :meth:`write_state`: ``(arrays, attrs)``, or None."""
+    def _read_group(self, t: int, group: str) -> tuple[dict[str, np.ndarray], dict] | None:
         try:
-            g = zarr.open_group(self._store, path=f"tiles/{self._tile(tile)}/state", mode="r")
+            g = zarr.open_group(self._store, path=f"tiles/{t}/{group}", mode="r")
         except (FileNotFoundError, KeyError):
             return None
         if g.attrs.get("done") is not True:
             return None
         return {n: g[n][:] for n in g.attrs["names"]}, dict(g.attrs.get("attrs", {}))
+
+    # ------------------------------------------------------------------ refined kept flags
+    def write_refined(self, tile: int, kept, attrs: Mapping[str, Any] | None = None) -> None:
+        """Save the kept flags a pass after the global cut chose for a tile's core points
+        (the gap refinement), at ``tiles/<id>/refined/kept``; like results, they count only
+        once written. Kept apart from the result, which a deeper pass may rewrite;
+        ``attrs`` say which cut they refine (:meth:`read_refined`)."""
+        t = self._tile(tile)
+        kept = np.asarray(kept, dtype=bool)
+        if kept.shape != (self.count(t),):
+            raise InputError(f"refined kept flags have shape {kept.shape} but tile {t} has "
+                             f"{self.count(t)} core points")
+        self._write_group(t, "refined", {"kept": kept}, attrs)
+
+    def read_refined(self, tile: int) -> tuple[np.ndarray, dict] | None:
+        """A tile's kept flags saved by :meth:`write_refined` and their attrs, or None."""
+        got = self._read_group(self._tile(tile), "refined")
+        return None if got is None else (got[0]["kept"], got[1])
 
     def delete_state(self, tile: int) -> None:
         """Remove a tile's state (if any) to free the disk space."""
