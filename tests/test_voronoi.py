@@ -80,6 +80,19 @@ def test_reach_bounds_the_neighbours_of_a_quantised_flat_face():
     def short(E):
         return {e for e in E if np.linalg.norm(X[e[0]] - X[e[1]]) < 3 * spacing}
     assert short(e1) == short(e0)
+    # the guard points that end the far cells for Qhull change no edge within reach, and the
+    # candidates no longer hold the far ones
+    plain, _ = voronoi.candidate_edges(X)
+    guarded, _ = voronoi.candidate_edges(X, 10 * spacing)
+    most, most_guarded = np.bincount(plain.ravel()).max(), np.bincount(guarded.ravel()).max()
+    assert most > 300 and most_guarded < 0.4 * most
+    D = voronoi.scale_of(X)
+    s, c, _, p, _ = adjacency.from_edges(len(X), plain, slack=0)
+    ref = voronoi.filter_candidates(X, s, c, p, voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D,
+                                    10 * spacing)
+    assert e1 == {tuple(e) for e in ref.tolist()}
+    G = voronoi.guard_points(X, 10 * spacing)
+    assert len(G) > 0 and cKDTree(X).query(G)[0].min() > 20 * spacing
 
 
 def _remove_sequence(X, victims, reach=np.inf):
