@@ -10,6 +10,8 @@ part-way still shows its rate.
     python benchmarks/pipeline_speed.py 200000 1000000
     python benchmarks/pipeline_speed.py --workers 2 --tile-points 150000 10000000
     python benchmarks/pipeline_speed.py --floor 0.25 1000000
+    python benchmarks/pipeline_speed.py --one scan.laz 2 150000 0.5 > w2.json  # one run
+    python benchmarks/pipeline_speed.py --table w1.json w2.json                # its table
 """
 
 import json
@@ -92,9 +94,14 @@ def main(sizes, workers=(1, 2), tile_points=None, floor=0.5):
                 rows.append(json.loads(out.strip().splitlines()[-1]))
     load = " ".join(Path("/proc/loadavg").read_text().split()[:3])
     print(f"floor {floor}; load average at the end {load}")
+    table(rows)
+
+
+def table(rows):
+    """The markdown table of ``--one`` results (speed-up against the first row of each size)."""
     print("| points | workers | tiles | wall s | input pts/s | speed-up | ingest s | neighbours s "
-          "| tiles s | deeper s (tiles) | output s | CPU s | peak RSS MB |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| tiles s | deeper s (tiles) | refine s | output s | CPU s | peak RSS MB |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     base = {}
     for r in rows:
         base.setdefault(r["n"], r["wall"])
@@ -102,12 +109,16 @@ def main(sizes, workers=(1, 2), tile_points=None, floor=0.5):
         print(f"| {r['n']:,} | {r['workers']} | {r['tiles']} | {r['wall']:.1f} "
               f"| {r['n'] / r['wall']:,.0f} | {base[r['n']] / r['wall']:.2f}x "
               f"| {sec['ingest']:.1f} | {sec['neighbours']:.1f} | {sec['tiles']:.1f} "
-              f"| {sec['deeper']:.1f} ({r['deeper']}) | {sec['output']:.1f} | {r['cpu']:.0f} "
+              f"| {sec['deeper']:.1f} ({r['deeper']}) "
+              f"| {sec.get('gaps', 0.0) + sec.get('refine', 0.0):.1f} | {sec['output']:.1f} "
+              f"| {r['cpu']:.0f} "
               f"| {r['rss_mb']:.0f} |")
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 6 and sys.argv[1] == "--one":
+    if len(sys.argv) > 2 and sys.argv[1] == "--table":  # saved --one outputs, one per file
+        table([json.loads(Path(f).read_text().strip().splitlines()[-1]) for f in sys.argv[2:]])
+    elif len(sys.argv) == 6 and sys.argv[1] == "--one":
         print(json.dumps(one(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]),
                              float(sys.argv[5]))))
     else:

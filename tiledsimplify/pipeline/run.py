@@ -210,8 +210,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         its core points (default 0.5: half the target ratio). Tiles the global cut reaches
         beyond that (flat ones) are run again, deeper, exactly as far as the cut needs; the
         output does not depend on ``floor``, only the time does. The end of a tile's removal
-        sequence is slow (points around emptied flat faces gain hundreds of Voronoi
-        neighbours), which is why tiles do not simply run to the end.
+        sequence is wasted work (and in mode "paper", with its unbounded neighbourhoods, slow:
+        points around emptied flat faces gain hundreds of Voronoi neighbours), which is why
+        tiles do not simply run to the end.
     chunk_points : int
         Points read per input chunk (bounds ingest memory).
     progress : bool
