@@ -383,33 +383,34 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
     cut = [int(prefix[i]) for i in range(ts.n_tiles)]
     key = hashlib.sha256(json.dumps(cut).encode()).hexdigest()[:20]
     if ts.run_attrs.get("cut_key") != key:
-        ts.set_run_attrs({"cut": cut, "cut_key": key, "band": None})
-    band = ts.run_attrs.get("band")
-    if band is None:
+        ts.set_run_attrs({"cut": cut, "cut_key": key, "cut_hausdorff": None})
+    g = ts.run_attrs.get("cut_hausdorff")
+    if g is None:
         done = _compute([dask.delayed(cut_hausdorff)(str(store_path), i)
                          for i in range(ts.n_tiles)], scheduler, workers, client, progress,
                         "gaps")
-        band = max(d["hausdorff"] for d in done)
-        if not band <= ts.halo:
+        g = max(d["hausdorff"] for d in done)
+        if not g <= ts.halo:
             log.warning("no gap refinement: the cut leaves points %.4g from the nearest kept "
                         "point, farther than the halo (%.4g); give a wider --halo to refine",
-                        band, ts.halo)
+                        g, ts.halo)
             return False
-        ts.set_run_attrs({"band": band})
+        ts.set_run_attrs({"cut_hausdorff": g})
     phase = refine_phases(ts.plan, ts.halo)
+    n_phases = int(phase.max()) + 1 if len(phase) else 0
     n_done = 0
-    for p in range(int(phase.max()) + 1 if len(phase) else 0):
+    for p in range(n_phases):
         pending = [i for i in np.flatnonzero(phase == p).tolist()
-                   if not is_refined(ts, i, key, band)]
+                   if not is_refined(ts, i, key, g)]
         if not pending:
             continue
         earlier = {i: [int(j) for j in ts.neighbours(i) if phase[j] < p] for i in pending}
-        _compute([dask.delayed(refine_tile)(str(store_path), i, band, earlier[i])
+        _compute([dask.delayed(refine_tile)(str(store_path), i, g, earlier[i])
                   for i in pending], scheduler, workers, client, progress,
-                 f"refine {p + 1}/{phase.max() + 1}", _refine_line)
+                 f"refine {p + 1}/{n_phases}", _refine_line)
         n_done += len(pending)
-    log.info("refined %d tiles in %d phases (cut Hausdorff %.4g) in %.1f s", n_done,
-             int(phase.max()) + 1 if len(phase) else 0, band, time.perf_counter() - t0)
+    log.info("refined %d tiles in %d phases (cut Hausdorff %.4g) in %.1f s", n_done, n_phases,
+             g, time.perf_counter() - t0)
     return True
 
 

@@ -72,7 +72,7 @@ def _view(store, tile, cut, refined=()):
     keep = np.zeros(len(core_xyz) + len(halo_xyz), dtype=bool)
     keep[:len(core_xyz)] = _kept(store, tile, cut)
     halo_keep = keep[len(core_xyz):]
-    refined = set(int(j) for j in refined)
+    refined = {int(j) for j in refined}
     for j in np.unique(owner):
         at = owner == j
         halo_keep[at] = (_refined(store, int(j)) if int(j) in refined
