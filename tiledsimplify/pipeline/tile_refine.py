@@ -36,8 +36,12 @@ width ``G`` at faces (the previous scheme), tiles filled those gaps from both si
 thinned near faces: kept density in a two-spacing band at faces rose to 1.17x the untiled
 run's (Bunny, ratio 0.1, 6000 points per tile). In phases a gap across a face is filled once
 (the later tile sees the earlier tile's fill; each fills only for its own core) and faces are
-thinned like the interior: 1.03x (Fandisk scan 1.02x), Hausdorff 1.02x the untiled one, for
-five phases of nine tiles (refine stage 0.9 s → 1.4 s).
+thinned like the interior: 1.03x (Fandisk scan 1.02x), Hausdorff 1.02x the untiled one (was
+1.04x). Nine tiles make five phases; the refine stage took 0.9–2.8 s before, 1.1–2.1 s after
+on the shared 2-core machine (38 tiles at 1500 points: 4.5–9.0 s before, 4.9–6.8 s after):
+the phases cost no time measurable here. A wider halo does not close the cut's face gaps
+(Bunny, 15 spacings: worst near a face 0.00453 vs 0.00519, but 20 spacings 0.00518; Fandisk
+15: worse).
 """
 
 import time
