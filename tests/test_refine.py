@@ -95,6 +95,35 @@ def test_points_not_addable_are_never_added_and_do_not_count(seed):
     assert np.array_equal(a, b)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_watched_points_are_never_added_and_never_left_worse_than_the_level(seed):
+    # a tile refined after its neighbour: the neighbour's removed points (right part) are
+    # final, so the tile may not uncover them beyond a round's level, nor fill for them
+    rng = np.random.default_rng(seed)
+    X = _wavy(3000, seed)
+    keep = rng.random(3000) < 0.15
+    keep[X[:, 0] < 1.0] &= rng.random(3000)[X[:, 0] < 1.0] < 0.3
+    mid = (X[:, 0] > 1.5) & (X[:, 0] < 2.5)
+    keep[mid] &= rng.random(3000)[mid] < 0.4
+    other = X[:, 0] > 2.0
+    watched = other & ~keep
+    d0 = cKDTree(X[keep]).query(X[watched])[0]
+    out, info = refine_coverage(X, keep, other, addable=~other, watch=other)
+    assert out.sum() == keep.sum()
+    assert np.array_equal(out[other], keep[other])
+    counted = ~watched
+    assert info["hausdorff_after"] == pytest.approx(
+        float(cKDTree(X[out]).query(X[counted])[0].max()))
+    assert info["swaps"] > 0
+    d1 = cKDTree(X[out]).query(X[watched])[0]
+    assert (d1 <= np.maximum(d0, 0.95 * info["hausdorff_before"])).all()
+    if seed == 0:  # here points that are not watched end farther than that
+        free, _ = refine_coverage(X, keep, other, addable=~other)
+        d2 = cKDTree(X[free]).query(X[watched])[0]
+        assert (d2 > np.maximum(d0, info["hausdorff_after"]) + 1e-12).any()
+        assert (d1 <= np.maximum(d0, info["hausdorff_after"]) + 1e-12).all()
+
+
 def test_everything_fixed_changes_nothing():
     X = _wavy(500)
     keep = np.random.default_rng(0).random(500) < 0.2

@@ -155,8 +155,8 @@ def _fill(X, tree_x, dist, level):
         dist[x] = 0.0
 
 
-def refine_coverage(X, keep, fixed, *, addable=None, tie=None, step=0.05, min_step=0.002,
-                    max_rounds=60, k=16):
+def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=0.05,
+                    min_step=0.002, max_rounds=60, k=16):
     """Swap kept points at equal count so that the Hausdorff distance to the input drops.
 
     Parameters
@@ -171,6 +171,11 @@ def refine_coverage(X, keep, fixed, *, addable=None, tie=None, step=0.05, min_st
         Points that may be added (default: all). A point neither kept nor addable takes no
         part: it is never added and its distance does not count (a tile's removed halo
         points, which another tile owns). The Hausdorff distance is over ``keep | addable``.
+    watch : bool (n,), optional
+        Points neither kept nor addable whose coverage must not suffer (removed points of
+        other tiles): they do not count in the Hausdorff distance and are never added, but a
+        round at level ``τ`` never leaves one farther than ``max(τ, its distance before)``
+        (one within ``τ`` stays within ``τ``; the nearest kept point of one beyond stays).
     tie : uint64 (n,), optional
         Tie-breaker of equal gaps (default: the point index; the core passes
         :func:`.heap.coordinate_hash`).
@@ -201,6 +206,10 @@ def refine_coverage(X, keep, fixed, *, addable=None, tie=None, step=0.05, min_st
     n = X.shape[0]
     addable = np.ones(n, dtype=bool) if addable is None else np.asarray(addable, dtype=bool)
     ignored = ~(keep | addable)  # stays so: only addable points are ever added
+    watched = np.zeros(n, dtype=bool)
+    if watch is not None:
+        watched = np.asarray(watch, dtype=bool) & ignored
+        ignored &= ~watched
     if tie is None:
         tie = np.arange(n, dtype=np.uint64)
     info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
@@ -209,12 +218,13 @@ def refine_coverage(X, keep, fixed, *, addable=None, tie=None, step=0.05, min_st
     tree_x = cKDTree(X)
     dist, _ = cKDTree(X[keep]).query(X)
     dist[ignored] = 0.0
-    H = float(dist.max())
+    H = float(dist[~watched].max())
     info["hausdorff_before"] = H
     while info["rounds"] < max_rounds and step >= min_step and H > 0:
         info["rounds"] += 1
         level = (1.0 - step) * H
         trial = dist.copy()
+        trial[watched] = 0.0  # not filled for: another tile's
         added = _fill(X, tree_x, trial, level)
         cand = np.concatenate([np.flatnonzero(keep), added])
         removable = ~fixed[cand]
@@ -222,6 +232,8 @@ def refine_coverage(X, keep, fixed, *, addable=None, tie=None, step=0.05, min_st
         tree_c = cKDTree(X[cand])
         d1, o1 = tree_c.query(X)
         d1[ignored] = 0.0
+        far = watched & (d1 > level)
+        removable[o1[far]] = False  # a watched point beyond the level keeps its nearest
         rows = np.flatnonzero(removable[o1] & ~ignored)  # only these can lose their nearest
         kq = min(k, cand.size)
         nd, nbr = tree_c.query(X[rows], k=kq, distance_upper_bound=level)
@@ -239,6 +251,6 @@ def refine_coverage(X, keep, fixed, *, addable=None, tie=None, step=0.05, min_st
         info["swaps"] += int(added.size)
         d1[rows] = d_rows
         dist = d1
-        H = float(dist.max())
+        H = float(dist[~watched].max())
     info["hausdorff_after"] = H
     return keep, info

@@ -31,7 +31,7 @@ from ..io.points_out import write_points
 from ..io.sources import open_source
 from ..tiles import TileStore
 from .budget import deeper_tiles, global_cut, kept_in_tile, store_sequences
-from .tile_refine import cut_hausdorff, is_refined, refine_tile
+from .tile_refine import cut_hausdorff, is_refined, refine_phases, refine_tile
 from .tile_task import deviation_histogram, simplify_tile, threshold_from_histogram
 
 log = logging.getLogger("tiledsimplify")
@@ -373,34 +373,45 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
 def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
     """The gap refinement stage (:mod:`.tile_refine`); True if the tiles were refined.
 
-    Two passes of one task per tile: the cut's Hausdorff distance per tile (their maximum is
-    the band near tile faces where nothing is removed), then the refinement. The cut, its key
-    and the band are saved in the store, and each tile's refined flags with the key and band,
-    so a resumed run refines only the tiles still missing for this cut.
+    One task per tile for the cut's Hausdorff distance ``G`` per tile (refinement needs ``G``
+    within the halo), then the refinement in phases (:func:`refine_phases`): one compute per
+    phase, its tiles in parallel, each reading the refined flags of its neighbours from
+    earlier phases. The cut, its key and ``G`` are saved in the store, and each tile's refined
+    flags with the key and ``G``, so a resumed run refines only the tiles still missing for
+    this cut (flags are a fixed function of the cut, so those saved stay valid).
     """
     t0 = time.perf_counter()
     cut = [int(prefix[i]) for i in range(ts.n_tiles)]
     key = hashlib.sha256(json.dumps(cut).encode()).hexdigest()[:20]
     if ts.run_attrs.get("cut_key") != key:
-        ts.set_run_attrs({"cut": cut, "cut_key": key, "band": None})
-    band = ts.run_attrs.get("band")
-    if band is None:
+        ts.set_run_attrs({"cut": cut, "cut_key": key, "cut_hausdorff": None})
+    g = ts.run_attrs.get("cut_hausdorff")
+    if g is None:
         done = _compute([dask.delayed(cut_hausdorff)(str(store_path), i)
                          for i in range(ts.n_tiles)], scheduler, workers, client, progress,
                         "gaps")
-        band = max(d["hausdorff"] for d in done)
-        if not band <= ts.halo:
+        g = max(d["hausdorff"] for d in done)
+        if not g <= ts.halo:
             log.warning("no gap refinement: the cut leaves points %.4g from the nearest kept "
                         "point, farther than the halo (%.4g); give a wider --halo to refine",
-                        band, ts.halo)
+                        g, ts.halo)
             return False
-        ts.set_run_attrs({"band": band})
-    pending = [i for i in range(ts.n_tiles) if not is_refined(ts, i, key, band)]
-    if pending:
-        _compute([dask.delayed(refine_tile)(str(store_path), i, band) for i in pending],
-                 scheduler, workers, client, progress, "refine", _refine_line)
-    log.info("refined %d tiles (band %.4g) in %.1f s", len(pending), band,
-             time.perf_counter() - t0)
+        ts.set_run_attrs({"cut_hausdorff": g})
+    phase = refine_phases(ts.plan, ts.halo)
+    n_phases = int(phase.max()) + 1 if len(phase) else 0
+    n_done = 0
+    for p in range(n_phases):
+        pending = [i for i in np.flatnonzero(phase == p).tolist()
+                   if not is_refined(ts, i, key, g)]
+        if not pending:
+            continue
+        earlier = {i: [int(j) for j in ts.neighbours(i) if phase[j] < p] for i in pending}
+        _compute([dask.delayed(refine_tile)(str(store_path), i, g, earlier[i])
+                  for i in pending], scheduler, workers, client, progress,
+                 f"refine {p + 1}/{n_phases}", _refine_line)
+        n_done += len(pending)
+    log.info("refined %d tiles in %d phases (cut Hausdorff %.4g) in %.1f s", n_done, n_phases,
+             g, time.perf_counter() - t0)
     return True
 
 
