@@ -75,6 +75,7 @@ def one(kind, n):
     st = res.stats
     return {"case": kind, "n": n, "qhull": t_qhull, "knn17": t_knn, "core": t_core, "progressive": t_prog,
             "neighbours": st["seconds_neighbours_normals"], "removal": st["seconds_removal"],
+            "refine": st.get("seconds_refine", 0.0),
             "boundary": st["n_boundary"],
             "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
@@ -86,13 +87,14 @@ def main(cases):
         out = subprocess.run([sys.executable, __file__, "--one", kind, n], check=True,
                              capture_output=True, text=True).stdout
         rows.append(json.loads(out.strip().splitlines()[-1]))
-    print("| cloud | points | core s | µs/pt | pts/s | neighbours s | removal s | progressive s "
-          "| Qhull s | kNN-17 s | core / Qhull | peak RSS MB |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("| cloud | points | core s | µs/pt | pts/s | neighbours s | removal s | refine s "
+          "| progressive s | Qhull s | kNN-17 s | core / Qhull | peak RSS MB |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         n = r["n"]
         print(f"| {r['case']} | {n:,} | {r['core']:.2f} | {1e6 * r['core'] / n:.0f} | {n / r['core']:,.0f} "
-              f"| {r['neighbours']:.2f} | {r['removal']:.2f} | {r['progressive']:.2f} "
+              f"| {r['neighbours']:.2f} | {r['removal']:.2f} | {r.get('refine', 0.0):.2f} "
+              f"| {r['progressive']:.2f} "
               f"| {r['qhull']:.2f} | {r['knn17']:.2f} | {r['core'] / r['qhull']:.1f}x "
               f"| {r['rss_mb']:.0f} |")
 
