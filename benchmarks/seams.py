@@ -18,6 +18,7 @@ from tiledsimplify import BudgetWarning, metrics, simplify_points, synthetic
 from tiledsimplify.io import read_mesh, read_points
 from tiledsimplify.pipeline import run
 from tiledsimplify.pipeline.budget import kept_mask, store_cut
+from tiledsimplify.pipeline.tile_refine import refined_mask
 from tiledsimplify.tiles import TileStore
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -32,7 +33,8 @@ def case(name, X, ratio, tile_points, edges=None):
                 store=Path(tmp) / "store", workers=2)
         t_tiled = time.perf_counter() - t
         ts = TileStore.open(Path(tmp) / "store")
-        keep_t = kept_mask(ts, store_cut(ts, len(X) - s.target))
+        # the output: the cut, refined per tile if the run refined (mode "coverage")
+        keep_t = refined_mask(ts) if s.refined else kept_mask(ts, store_cut(ts, len(X) - s.target))
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BudgetWarning)
