@@ -237,7 +237,6 @@ def test_resume_finishes_the_remaining_tiles(bunny, tmp_path, caplog):
     run(path, again, ratio=0.2, tile_points=1500, store=store)
     assert again.read_bytes() == full.read_bytes()
     # an interrupted run: some tiles have no (finished) result
-    import zarr
     for t in (0, 3, 5):
         del zarr.open_group(str(store), mode="r+")[f"tiles/{t}/result"]
     assert len(TileStore.open(store).pending_tiles()) == 3

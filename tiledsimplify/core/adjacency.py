@@ -89,18 +89,21 @@ def from_lists(cnt, flat, slack=8):
     np.cumsum(cap[:-1], out=start[1:])
     used = int(cap.sum())
     pool = np.full(max(2 * used, 16), -1, dtype=np.int32)
-    first = np.zeros(n, dtype=np.int64)
-    np.cumsum(cnt[:-1], out=first[1:])
-    pool[np.repeat(start - first, cnt) + np.arange(int(cnt.sum()))] = flat
+    pool[_flat_slots(start, cnt)] = flat
     meta = np.array([used], dtype=np.int64)
     return start, cnt, cap, pool, meta
 
 
 def to_flat(start, cnt, pool):
     """The lists laid end to end (the inverse of :func:`from_lists`), as int32."""
+    return pool[_flat_slots(start, cnt)].astype(np.int32)
+
+
+def _flat_slots(start, cnt):
+    """Pool slot of every list entry, the lists laid end to end."""
     first = np.zeros(cnt.size, dtype=np.int64)
     np.cumsum(cnt[:-1], out=first[1:])
-    return pool[np.repeat(start - first, cnt) + np.arange(int(cnt.sum()))].astype(np.int32)
+    return np.repeat(start - first, cnt) + np.arange(int(cnt.sum()))
 
 
 def to_sets(start, cnt, pool, alive=None):

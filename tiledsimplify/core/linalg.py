@@ -198,6 +198,31 @@ def solve_small(A, b, n):
     return True
 
 
+#: running moments ``(sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)`` of no point
+NO_MOMENTS = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@jit_inline
+def add_moments(m, X, q, px, py, pz):
+    """The running moments ``m`` (see :data:`NO_MOMENTS`) with point ``q`` added, its
+    coordinates taken relative to ``(px, py, pz)``."""
+    sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = m
+    x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
+    return (sx + x, sy + y, sz + z, sxx + x * x, sxy + x * y, sxz + x * z, syy + y * y,
+            syz + y * z, szz + z * z)
+
+
+@jit_inline
+def moments_covariance(m, k):
+    """Covariance (c00, c01, c02, c11, c12, c22) of a reference point (the origin of the
+    moments) and the ``k`` points summed in ``m``."""
+    sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = m
+    cnt = k + 1.0
+    mx, my, mz = sx / cnt, sy / cnt, sz / cnt
+    return (sxx / cnt - mx * mx, sxy / cnt - mx * my, sxz / cnt - mx * mz,
+            syy / cnt - my * my, syz / cnt - my * mz, szz / cnt - mz * mz)
+
+
 @jit
 def covariance_about(X, p, idx, k):
     """Covariance (c00, c01, c02, c11, c12, c22) of ``p`` and the points ``idx[:k]``.
@@ -206,21 +231,7 @@ def covariance_about(X, p, idx, k):
     origin (LAS coordinates).
     """
     px, py, pz = X[p, 0], X[p, 1], X[p, 2]
-    sx = sy = sz = 0.0
-    sxx = sxy = sxz = syy = syz = szz = 0.0
+    m = NO_MOMENTS
     for j in range(k):
-        q = idx[j]
-        x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
-        sx += x
-        sy += y
-        sz += z
-        sxx += x * x
-        sxy += x * y
-        sxz += x * z
-        syy += y * y
-        syz += y * z
-        szz += z * z
-    cnt = k + 1.0
-    mx, my, mz = sx / cnt, sy / cnt, sz / cnt
-    return (sxx / cnt - mx * mx, sxy / cnt - mx * my, sxz / cnt - mx * mz,
-            syy / cnt - my * my, syz / cnt - my * mz, szz / cnt - mz * mz)
+        m = add_moments(m, X, idx[j], px, py, pz)
+    return moments_covariance(m, k)

@@ -32,7 +32,8 @@ import numpy as np
 
 from ._jit import jit, jit_inline
 from .clip import clip, square
-from .linalg import covariance_about, smallest_axis, sym3_eigvals, tangent_basis
+from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covariance,
+                     smallest_axis, sym3_eigvals, tangent_basis)
 
 #: neighbours used for the reference plane, at least
 MIN_PLANE = 6
@@ -89,41 +90,19 @@ def _plane_size(X, p, idx, d2, m):
     # for k < MIN_PLANE: those are computed (from the same running sums, so the same values)
     # only when no such k exists and the largest spread over all k decides.
     px, py, pz = X[p, 0], X[p, 1], X[p, 2]
-    sx = sy = sz = 0.0
-    sxx = sxy = sxz = syy = syz = szz = 0.0
+    mom = NO_MOMENTS
     for k in range(1, m + 1):
-        q = idx[k - 1]
-        x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
-        sx += x
-        sy += y
-        sz += z
-        sxx += x * x
-        sxy += x * y
-        sxz += x * z
-        syy += y * y
-        syz += y * z
-        szz += z * z
-        if k >= MIN_PLANE and _spread(k, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz) >= SPREAD:
+        mom = add_moments(mom, X, idx[k - 1], px, py, pz)
+        if k >= MIN_PLANE and _spread(mom, k) >= SPREAD:
             return k
-    sx = sy = sz = 0.0
-    sxx = sxy = sxz = syy = syz = szz = 0.0
+    mom = NO_MOMENTS
     best = -1.0
     kbest = m
     for k in range(1, m + 1):
-        q = idx[k - 1]
-        x, y, z = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
-        sx += x
-        sy += y
-        sz += z
-        sxx += x * x
-        sxy += x * y
-        sxz += x * z
-        syy += y * y
-        syz += y * z
-        szz += z * z
+        mom = add_moments(mom, X, idx[k - 1], px, py, pz)
         if k < 2:
             continue
-        spread = _spread(k, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)
+        spread = _spread(mom, k)
         if spread > best:
             best = spread
             kbest = k
@@ -131,13 +110,9 @@ def _plane_size(X, p, idx, d2, m):
 
 
 @jit_inline
-def _spread(k, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz):
-    """Middle / largest eigenvalue of the covariance of ``p`` and ``k`` points (running sums)."""
-    cnt = k + 1.0
-    mx, my, mz = sx / cnt, sy / cnt, sz / cnt
-    l0, l1, l2 = sym3_eigvals(sxx / cnt - mx * mx, sxy / cnt - mx * my,
-                              sxz / cnt - mx * mz, syy / cnt - my * my,
-                              syz / cnt - my * mz, szz / cnt - mz * mz)
+def _spread(mom, k):
+    """Middle / largest eigenvalue of the covariance of ``p`` and ``k`` points (moments)."""
+    l0, l1, l2 = sym3_eigvals(*moments_covariance(mom, k))
     return l1 / l2 if l2 > 0.0 else 0.0
 
 

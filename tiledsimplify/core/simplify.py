@@ -403,7 +403,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     rank[order[:cut]] = np.arange(cut)
     importance = np.full(n, np.nan)
     importance[order[:cut]] = order_importance[:cut]
-    if options.refine and options.guard == "none" and cut == n_remove and to_target > 0:
+    if options.refines and cut == n_remove and to_target > 0:
         fixed_u = boundary_u | frozen[rep] | (deviation_u > threshold)
         keep_u, info = refine_coverage(Xu, keep[rep], fixed_u, tie=tie)
         rank, importance = _swap(keep, rank, importance, rep, keep_u, order, order_importance,

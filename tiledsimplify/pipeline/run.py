@@ -275,9 +275,6 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                      n, ts.n_tiles, ts.halo, ts.spacing, time.perf_counter() - clock[0])
         stage("ingest")
 
-        # mode "paper": neighbourhoods of every tile (saved for the tile pass), one threshold
-        # for all tiles (mode "coverage" flags edges by a fixed candidate angle and a local
-        # edge fit: nothing global to find)
         # one spacing for every tile: the coverage measure's scale and the Voronoi reach
         spacing = options.spacing
         if spacing is None and ts.spacing > 0:
@@ -285,6 +282,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if spacing is not None:
             opts = {**opts, "spacing": spacing}
 
+        # mode "paper": neighbourhoods of every tile (saved for the tile pass), one threshold
+        # for all tiles (mode "coverage" flags edges by a fixed candidate angle and a local
+        # edge fit: nothing global to find)
         threshold = options.boundary_threshold
         if threshold is None and options.mode != "paper":
             threshold = edge_fit.CANDIDATE
@@ -340,7 +340,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             ts.delete_state(i)
         stage("budget")
         refined = False
-        if options.refine and options.guard == "none" and 0 < n_removed == n - target:
+        if options.refines and 0 < n_removed == n - target:
             refined = _refine(ts, store_path, prefix, scheduler, workers, client, progress)
         stage("refine")
         n_out, n_boundary = _write_output(ts, source, output, prefix, refined)

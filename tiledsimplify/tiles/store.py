@@ -923,23 +923,10 @@ class TileStore:
                 raise InputError(f"result {name!r} has dtype {arr.dtype}; only bool, integer "
                                  "and float arrays can be stored")
             data[name] = arr
-        tg = zarr.open_group(self._store, path=f"tiles/{t}", mode="r+")
-        if "result" in tg:
-            old = zarr.open_group(self._store, path=f"tiles/{t}/result", mode="r+")
-            if old.attrs.get("done") is True:
-                if not overwrite:
-                    raise ResultExistsError(f"tile {t} already has a finished result; pass "
-                                            "overwrite=True to replace it")
-                old.update_attributes({"done": False})
-            del tg["result"]
-        rows = int(self._attrs["chunk_rows"])
-        rg = tg.create_group("result", attributes={"done": False})
-        for name, arr in data.items():
-            rg.create_array(name, data=arr, chunks=(rows,) + arr.shape[1:],
-                            compressors=_codec())
-        extra = json.loads(json.dumps(dict(attrs or {})))
-        rg.update_attributes({"attrs": extra, "done": True, "names": list(data),
-                              "written_utc": _now()})
+        if self.is_done(t) and not overwrite:
+            raise ResultExistsError(f"tile {t} already has a finished result; pass "
+                                    "overwrite=True to replace it")
+        self._write_group(t, "result", data, attrs, rows=int(self._attrs["chunk_rows"]))
 
     def result_attrs(self, tile: int) -> dict:
         """The ``attrs`` stored with a done tile's result (empty if none or not done)."""
@@ -964,18 +951,24 @@ class TileStore:
         return self._read_group(self._tile(tile), "state")
 
     def _write_group(self, t: int, group: str, arrays: Mapping[str, Any],
-                     attrs: Mapping[str, Any] | None) -> None:
+                     attrs: Mapping[str, Any] | None, rows: int | None = None) -> None:
+        """Replace ``tiles/<t>/<group>`` with ``arrays`` (chunks of ``rows`` rows, default
+        ~1 MiB) and ``attrs``; ``done`` is set only after every array is written, and an old
+        group is marked not done before it is deleted, so a crash never leaves one that looks
+        complete."""
         tg = zarr.open_group(self._store, path=f"tiles/{t}", mode="r+")
         if group in tg:
+            zarr.open_group(self._store, path=f"tiles/{t}/{group}",
+                            mode="r+").update_attributes({"done": False})
             del tg[group]
         sg = tg.create_group(group, attributes={"done": False})
         for name, arr in arrays.items():
             arr = np.ascontiguousarray(arr)
-            rows = max(1, (1 << 20) // max(1, arr[:1].nbytes))
-            sg.create_array(str(name), data=arr, chunks=(rows,) + arr.shape[1:],
+            chunk = rows or max(1, (1 << 20) // max(1, arr[:1].nbytes))
+            sg.create_array(str(name), data=arr, chunks=(chunk,) + arr.shape[1:],
                             compressors=_codec())
         sg.update_attributes({"attrs": json.loads(json.dumps(dict(attrs or {}))),
-                              "names": list(arrays), "done": True})
+                              "names": list(arrays), "done": True, "written_utc": _now()})
 
     def _read_group(self, t: int, group: str) -> tuple[dict[str, np.ndarray], dict] | None:
         try:
