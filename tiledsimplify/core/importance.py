@@ -8,18 +8,19 @@ and so is removed only after every point that has one.
 
 Beyond the paper, ``"coverage"`` adds the hole a removal would open:
 ``i(p) = Eq.(1) + w · ρ(p)²`` with ``ρ(p)²`` the mean squared distance from ``p`` to its
-local-mesh neighbours (boundary ones included). On a plane Eq. (1) is ~0 for every point, so the paper's
-greedy empties flat faces; the ``ρ²`` term makes it thin them evenly instead (dense spots go
-first, as in Poisson-disk sample elimination), and a point whose neighbours are already far
-apart is expensive to remove. ``w`` has units of 1/length: a sphere of curvature ``κ`` gives
-Eq. (1) ≈ κρ²/2, so ``w`` is about the curvature below which a region counts as flat; the core
-sets it from the point spacing (:func:`coverage_weight`). Both terms depend only on ``DN_p``
-and the normals of ``DN_p``, so the exact two-ring updates of the removal loop stay exact. A
-point whose neighbours are all boundary points has no Eq. (1) term here (0) rather than
-``+inf``; a point with no local-mesh neighbour at all (none within the Voronoi reach, see
-:mod:`.voronoi`) gets ``+inf``: it is the only point covering its surroundings. (Measured alternative, not kept: ``h = reach + nearest distance``, a running bound on
-the Hausdorff radius each point covers, inherited by the nearest neighbour on removal — worse
-Hausdorff on Fandisk at 20 %, 210 vs 188 × 1e-4 of the diagonal.)
+local-mesh neighbours (boundary ones included). On a plane Eq. (1) is ~0 for every point, so
+the paper's greedy empties flat faces; the ``ρ²`` term makes it thin them evenly instead (dense
+spots go first, as in Poisson-disk sample elimination), and a point whose neighbours are
+already far apart is expensive to remove. ``w`` has units of 1/length: a sphere of curvature
+``κ`` gives Eq. (1) ≈ κρ²/2, so ``w`` is about the curvature below which a region counts as
+flat; the core sets it from the point spacing (:func:`coverage_weight`). Both terms depend only
+on ``DN_p`` and the normals of ``DN_p``, so the exact two-ring updates of the removal loop stay
+exact. A point whose neighbours are all boundary points has no Eq. (1) term here (0) rather
+than ``+inf``; a point with no local-mesh neighbour at all (none within the Voronoi reach, see
+:mod:`.voronoi`) gets ``+inf``: it is the only point covering its surroundings. (Measured
+alternative, not kept: ``h = radius + nearest distance``, a running bound on the Hausdorff
+radius each point covers, inherited by the nearest neighbour on removal — worse Hausdorff on
+Fandisk at 20 %, 210 vs 188 × 1e-4 of the diagonal.)
 
 Measures are selected by name and dispatched by a small integer inside the removal kernel, so
 new measures plug in without touching the loop.

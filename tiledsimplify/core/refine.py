@@ -12,8 +12,8 @@ point:
    every input point lies within ``τ`` of the kept set; say ``a`` were added.
 3. **Thin**: remove ``a`` kept points that are neither fixed nor just added, each only if every
    input point it is the nearest kept point of has another kept point within ``τ`` — so the
-   bound ``τ`` survives every removal. Candidates go in order of ``priority`` (lowest first;
-   default: the gap their removal would open, smallest first, as in sample elimination).
+   bound ``τ`` survives every removal. Candidates go smallest gap (the one their removal would
+   open) first, as in sample elimination.
 4. If ``a`` removals were found, commit the swap and aim lower; otherwise halve ``step`` and
    try again, and stop when it falls below ``min_step`` or after ``max_rounds`` tries.
 

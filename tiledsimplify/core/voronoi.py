@@ -13,8 +13,9 @@ Construction
     points shifted by a deterministic pseudo-random ``JITTER`` (1e-10 of the extent): on CAD
     scans with exactly flat faces it otherwise merges facets for minutes (35 s for 40k Fandisk
     points, 2 s with the shift). The shift can only change edges whose facet is thinner than
-    ~1e-10 of the diagonal, and those count as degenerate anyway (``TOL_FACTOR`` = 1e-8). Clouds of affine rank 2
-    (a flat plate) use the 2-D Delaunay of the plane, rank 1 the chain along the line, and tiny
+    ~1e-10 of the diagonal, and those count as degenerate anyway (``TOL_FACTOR`` = 1e-8).
+    Clouds of affine rank 2 (a flat plate) use the 2-D Delaunay of the plane, rank 1 the chain
+    along the line, and tiny
     or Qhull-rejected clouds all pairs or a joggled (``QJ``) triangulation as candidates; the
     positive-area filter then decides on the exact coordinates in every case.
 
@@ -72,9 +73,10 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
     are skipped). Each half-space is shrunk by ``tol`` so that a facet of zero width (four or
     more co-spherical points) comes out empty. Only the part of the facet within ``reach`` of
     ``a`` and ``b`` counts — the disc of radius ``sqrt(reach² - |ab|²/4)`` around their
-    midpoint, shrunk by ``tol`` too (``inf``: the whole facet, as the paper). If ``inside >= 0``, the facet is first clipped
-    to ``|x - inside| <= |x - a|``: after the removal of ``inside`` a new facet lies entirely in
-    its former cell, and this one cut usually leaves little for the others to empty.
+    midpoint, shrunk by ``tol`` too (``inf``: the whole facet, as the paper). If
+    ``inside >= 0``, the facet is first clipped to ``|x - inside| <= |x - a|``: after the
+    removal of ``inside`` a new facet lies entirely in its former cell, and this one cut
+    usually leaves little for the others to empty.
 
     ``xa, ya, la, xb, yb, lb`` are scratch buffers of length at least ``ncand + 5``; ``frame``
     is a (3, 3) scratch array.

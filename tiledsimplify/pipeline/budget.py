@@ -6,7 +6,7 @@ every tile's sequence, and a flat tile (low importances) gives up more of its po
 curved one. Ordering all steps of all tiles by the key (running maximum, tile, step) and taking
 the ``n - target`` smallest hits the requested count exactly.
 
-Tiles are not run to the end of their sequence (its end is slow, see
+Tiles are not run to the end of their sequence (its end is wasted work, see ``floor`` in
 :func:`~tiledsimplify.pipeline.run`), so a tile may know only a prefix of its sequence, up to a
 running maximum ``L_t`` after ``r_t`` steps. Every step it does not know has a key of at least
 ``(L_t, t, r_t)``. The cut over the known steps is therefore the cut over the full sequences

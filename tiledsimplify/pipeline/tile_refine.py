@@ -31,17 +31,12 @@ kept while it runs. Points another tile of the same phase removes are not in its
 two tiles remove the two points a point relies on. Hence no point ends farther than ``G``: the
 output's Hausdorff distance is never above the cut's.
 
-**Seams.** The cut's worst gaps lie at tile faces. Refined concurrently with a frozen band of
-width ``G`` at faces (the previous scheme), tiles filled those gaps from both sides and never
-thinned near faces: kept density in a two-spacing band at faces rose to 1.17x the untiled
-run's (Bunny, ratio 0.1, 6000 points per tile). In phases a gap across a face is filled once
-(the later tile sees the earlier tile's fill; each fills only for its own core) and faces are
-thinned like the interior: 1.03x (Fandisk scan 1.02x), Hausdorff 1.02x the untiled one (was
-1.04x). Nine tiles make five phases; the refine stage took 0.9–2.8 s before, 1.1–2.1 s after
-on the shared 2-core machine (38 tiles at 1500 points: 4.5–9.0 s before, 4.9–6.8 s after):
-the phases cost no time measurable here. A wider halo does not close the cut's face gaps
-(Bunny, 15 spacings: worst near a face 0.00453 vs 0.00519, but 20 spacings 0.00518; Fandisk
-15: worse).
+**Seams.** The cut's worst gaps lie at tile faces. In phases a gap across a face is filled
+once (the later tile sees the earlier tile's fill; each fills only for its own core) and faces
+are thinned like the interior. Tiles refined concurrently with a frozen band of width ``G`` at
+their faces instead filled such gaps from both sides and never thinned near faces (kept density
+at faces 1.17x the untiled run's on the Bunny; in phases 1.03x, README "Seams"). A wider halo
+does not close the cut's face gaps.
 """
 
 import time
