@@ -203,3 +203,39 @@ def thin_below(X, cand, removable, tie, level, n_remove):
         alive[best[1]] = False
         removed.append(best[1])
     return np.array(removed, dtype=np.int64)
+
+
+def thin_lists(nbr, nd, removable, tie, level, n_remove):
+    """Gap thinning on given candidate lists (``nbr``/``nd`` as
+    :func:`tiledsimplify.core.refine.thin_below` takes them, id ``m`` = none) by recomputing
+    every owner and every gap from scratch at each step. Returns ``(removed, dist)``."""
+    m = len(removable)
+    alive = np.ones(m + 1, dtype=bool)
+    alive[m] = False
+    removed = []
+
+    def first(x, start):
+        live = [j for j in range(start, nbr.shape[1]) if alive[nbr[x, j]]]
+        return live[0] if live else -1
+
+    def owners():  # position of each row's owner; a row whose list starts with "none" keeps 0
+        return [0 if nbr[x, 0] == m else first(x, 0) for x in range(len(nbr))]
+
+    while len(removed) < n_remove:
+        own = owners()
+        best = None
+        for c in np.flatnonzero(alive[:m] & removable):
+            gaps = [0.0]
+            for x in range(len(nbr)):
+                if own[x] >= 0 and nbr[x, own[x]] == c:
+                    j = first(x, own[x] + 1)
+                    gaps.append(nd[x, j] if j >= 0 else np.inf)
+            if best is None or (max(gaps), tie[c], c) < best:
+                best = (max(gaps), tie[c], c)
+        if best is None or not best[0] <= level:
+            break
+        alive[best[2]] = False
+        removed.append(best[2])
+    own = owners()
+    dist = np.array([nd[x, j] if j >= 0 else np.inf for x, j in enumerate(own)])
+    return np.array(removed, dtype=np.int64), dist

@@ -43,35 +43,37 @@ def _first_alive(row, alive, j):
 
 
 @jit
-def _gap(c, nbr, nd, owner, alive, rev_start, rev):
+def _gap(c, nbr, nd, owner, alive, head, nxt):
     """The largest distance an input point owned by ``c`` would have to its next candidate if
     ``c`` were removed (inf if one has none among its ``k``)."""
     worst = 0.0
-    for t in range(rev_start[c], rev_start[c + 1]):
-        x = rev[t]
-        j = owner[x]
-        if j < 0 or nbr[x, j] != c:
-            continue
-        nxt = _first_alive(nbr[x], alive, j + 1)
-        if nxt < 0:
+    x = head[c]
+    while x >= 0:
+        j = _first_alive(nbr[x], alive, owner[x] + 1)
+        if j < 0:
             return np.inf
-        if nd[x, nxt] > worst:
-            worst = nd[x, nxt]
+        if nd[x, j] > worst:
+            worst = nd[x, j]
+        x = nxt[x]
     return worst
 
 
 @jit
-def thin_below(nbr, nd, rev_start, rev, removable, tie, level, n_remove):
+def thin_below(nbr, nd, removable, tie, level, n_remove):
     """Remove up to ``n_remove`` candidates, smallest gap first, never leaving an input point
     farther than ``level`` from its nearest remaining candidate.
 
     ``nbr`` / ``nd`` (r, k): for the input points that may change owner, their ``k`` nearest
     candidates (ids into the candidate set, nearest first; id ``m`` and distance inf where
-    fewer lie within the search radius) and the distances; ``rev_start`` /
-    ``rev`` (CSR): for every candidate the rows that list it. ``removable`` (m,) marks the
-    candidates that may go; ``tie`` (uint64, m) breaks equal gaps. The gap of a candidate is
-    the largest distance a row it owns would have to its next candidate; gaps only grow as
-    candidates go, so the queue is kept up to date lazily.
+    fewer lie within the search radius) and the distances. ``removable`` (m,) marks the
+    candidates that may go; ``tie`` (uint64, m) breaks equal gaps. A row is *owned* by its
+    nearest remaining candidate; the gap of a candidate is the largest distance a row it owns
+    would have to its next candidate. Gaps only grow as candidates go, so the queue is kept up
+    to date lazily: a candidate's gap is recomputed when it reaches the top.
+
+    Each candidate's owned rows are a linked list (``head`` / ``nxt``; a row is in one list at
+    a time), so a gap costs the few rows a candidate owns, not every row that lists it; the
+    first gaps come from one pass over the rows.
 
     Returns
     -------
@@ -85,18 +87,28 @@ def thin_below(nbr, nd, rev_start, rev, removable, tie, level, n_remove):
     m = removable.size
     alive = np.ones(m + 1, dtype=np.bool_)
     alive[m] = False  # id m: no candidate (beyond the search radius)
-    owner = np.zeros(r, dtype=np.int64)
+    owner = np.zeros(r, dtype=np.int64)  # position in the row of its owner; -1: none left
+    head = np.full(m + 1, -1, dtype=np.int64)
+    nxt = np.full(r, -1, dtype=np.int64)
     key = np.zeros(m)
+    for x in range(r - 1, -1, -1):
+        c = nbr[x, 0]
+        if c < m:
+            nxt[x] = head[c]
+            head[c] = x
+            if removable[c]:
+                j = _first_alive(nbr[x], alive, 1)
+                g = nd[x, j] if j >= 0 else np.inf
+                if g > key[c]:
+                    key[c] = g
     items = np.nonzero(removable)[0]
-    for c in items:
-        key[c] = _gap(c, nbr, nd, owner, alive, rev_start, rev)
     hp, pos = heap.new(m)
     size = heap.build(hp, pos, key, tie, items)
     out = np.empty(min(n_remove, items.size), dtype=np.int64)
     done = 0
     while done < out.size and size > 0:
         c = hp[0]
-        g = _gap(c, nbr, nd, owner, alive, rev_start, rev)
+        g = _gap(c, nbr, nd, owner, alive, head, nxt)
         if g > key[c]:  # stale: the gap grew since it was queued
             heap.update(hp, pos, key, tie, c, g, size)
             continue
@@ -107,35 +119,21 @@ def thin_below(nbr, nd, rev_start, rev, removable, tie, level, n_remove):
         alive[c] = False
         out[done] = c
         done += 1
-        for t in range(rev_start[c], rev_start[c + 1]):
-            x = rev[t]
-            if owner[x] >= 0 and nbr[x, owner[x]] == c:
-                owner[x] = _first_alive(nbr[x], alive, owner[x] + 1)
+        x = head[c]
+        head[c] = -1
+        while x >= 0:  # its rows move to their next remaining candidate
+            after = nxt[x]
+            j = _first_alive(nbr[x], alive, owner[x] + 1)
+            owner[x] = j
+            if j >= 0:
+                d = nbr[x, j]
+                nxt[x] = head[d]
+                head[d] = x
+            x = after
     dist = np.empty(r)
     for x in range(r):
         dist[x] = nd[x, owner[x]] if owner[x] >= 0 else np.inf
     return out[:done], dist
-
-
-@jit
-def owners_csr(nbr, m):
-    """For each of ``m`` candidates, the input points whose list ``nbr`` (n, k) names it
-    (CSR: ``rev[rev_start[c]:rev_start[c + 1]]``, ascending), by a counting sort."""
-    n, k = nbr.shape
-    rev_start = np.zeros(m + 1, dtype=np.int64)
-    for x in range(n):
-        for j in range(k):
-            rev_start[nbr[x, j] + 1] += 1
-    for c in range(m):
-        rev_start[c + 1] += rev_start[c]
-    fill = rev_start[:m].copy()
-    rev = np.empty(n * k, dtype=np.int64)
-    for x in range(n):
-        for j in range(k):
-            c = nbr[x, j]
-            rev[fill[c]] = x
-            fill[c] += 1
-    return rev_start, rev
 
 
 def _fill(X, tree_x, dist, level):
@@ -239,8 +237,7 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         nd, nbr = tree_c.query(X[rows], k=kq, distance_upper_bound=level)
         nd = np.ascontiguousarray(nd.reshape(rows.size, kq))
         nbr = np.ascontiguousarray(nbr.reshape(rows.size, kq), dtype=np.int64)
-        rev_start, rev = owners_csr(nbr, cand.size + 1)
-        gone, d_rows = thin_below(nbr, nd, rev_start, rev, removable,
+        gone, d_rows = thin_below(nbr, nd, removable,
                                   np.ascontiguousarray(tie[cand], dtype=np.uint64), level,
                                   added.size)
         if gone.size < added.size:
