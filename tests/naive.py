@@ -2,7 +2,7 @@
 
 import numpy as np
 from scipy.optimize import linprog
-from scipy.spatial import Delaunay, Voronoi
+from scipy.spatial import Delaunay, Voronoi, cKDTree
 
 from tiledsimplify.core import local_mesh as lm
 
@@ -239,3 +239,73 @@ def thin_lists(nbr, nd, removable, tie, level, n_remove):
     own = owners()
     dist = np.array([nd[x, j] if j >= 0 else np.inf for x, j in enumerate(own)])
     return np.array(removed, dtype=np.int64), dist
+
+
+def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=0.05,
+                    min_step=0.002, max_rounds=60, k=16):
+    """:func:`tiledsimplify.core.refine.refine_coverage` with every search a scipy kd-tree
+    query, as it was first written: a fill by ball queries, and per round a kd-tree over the
+    candidates, a nearest query of every input point and a ``k``-nearest query of the rows."""
+    from tiledsimplify.core.refine import thin_below
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    keep = np.asarray(keep, dtype=bool).copy()
+    fixed = np.asarray(fixed, dtype=bool) & keep
+    n = X.shape[0]
+    addable = np.ones(n, dtype=bool) if addable is None else np.asarray(addable, dtype=bool)
+    ignored = ~(keep | addable)
+    watched = np.zeros(n, dtype=bool)
+    if watch is not None:
+        watched = np.asarray(watch, dtype=bool) & ignored
+        ignored &= ~watched
+    if tie is None:
+        tie = np.arange(n, dtype=np.uint64)
+    info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
+    if not (keep & ~fixed).any() or not (addable & ~keep).any():
+        return keep, info
+    tree_x = cKDTree(X)
+    dist, _ = cKDTree(X[keep]).query(X)
+    dist[ignored] = 0.0
+    H = float(dist[~watched].max())
+    info["hausdorff_before"] = H
+    while info["rounds"] < max_rounds and step >= min_step and H > 0:
+        info["rounds"] += 1
+        level = (1.0 - step) * H
+        trial = dist.copy()
+        trial[watched] = 0.0
+        added = []
+        while True:  # fill, farthest first
+            x = int(np.argmax(trial))
+            r = trial[x]
+            if not r > level:
+                break
+            added.append(x)
+            near = np.asarray(tree_x.query_ball_point(X[x], r), dtype=np.int64)
+            np.minimum.at(trial, near, np.linalg.norm(X[near] - X[x], axis=1))
+            trial[x] = 0.0
+        added = np.asarray(added, dtype=np.int64)
+        cand = np.concatenate([np.flatnonzero(keep), added])
+        removable = ~fixed[cand]
+        removable[cand.size - added.size:] = False
+        tree_c = cKDTree(X[cand])
+        d1, o1 = tree_c.query(X)
+        d1[ignored] = 0.0
+        removable[o1[watched & (d1 > level)]] = False
+        rows = np.flatnonzero(removable[o1] & ~ignored)
+        kq = min(k, cand.size)
+        nd, nbr = tree_c.query(X[rows], k=kq, distance_upper_bound=level)
+        nd = np.ascontiguousarray(nd.reshape(rows.size, kq))
+        nbr = np.ascontiguousarray(nbr.reshape(rows.size, kq), dtype=np.int64)
+        gone, d_rows = thin_below(nbr, nd, removable,
+                                  np.ascontiguousarray(tie[cand], dtype=np.uint64), level,
+                                  added.size)
+        if gone.size < added.size:
+            step *= 0.5
+            continue
+        keep[added] = True
+        keep[cand[gone]] = False
+        info["swaps"] += int(added.size)
+        d1[rows] = d_rows
+        dist = d1
+        H = float(dist[~watched].max())
+    info["hausdorff_after"] = H
+    return keep, info

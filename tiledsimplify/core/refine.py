@@ -20,15 +20,25 @@ point:
 Every committed round lowers the Hausdorff distance by at least ``min_step · H``; a failed one
 changes nothing. So the result never has a larger Hausdorff distance than the input kept set.
 
-Nearest kept points are searched among each input point's ``k`` nearest candidates (kd-tree,
-``scipy.spatial.cKDTree``); a point with no candidate left among them counts as uncovered, so a
-removal that would need a farther one is refused (never wrongly allowed).
+Nearest kept points are searched among each input point's ``k`` nearest candidates; a point
+with no candidate left among them counts as uncovered, so a removal that would need a farther
+one is refused (never wrongly allowed).
+
+**Searches.** Written first with a kd-tree (``scipy.spatial.cKDTree``) per round: a build over
+the candidates, a nearest query of every input point, a ``k``-nearest query of the rows and a
+ball query per added point. The results are defined by those queries, including the kd-tree's
+order of equal distances. The candidates change every round but the input points do not, so
+one grid of cells (:mod:`.cell_grid`, side ≥ the first Hausdorff distance, which bounds every
+radius asked) is built once and each round only sorts the candidates into it; the cells give
+the kd-tree's answers bit for bit, and the few points whose answer hangs on the order of
+(nearly) equal distances are asked of the kd-tree, built only in rounds that need it. Tests
+compare the whole pass with the kd-tree version (``tests/naive.py``).
 """
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from . import heap
+from . import cell_grid, heap
 from ._jit import jit
 
 
@@ -136,21 +146,118 @@ def thin_below(nbr, nd, removable, tie, level, n_remove):
     return out[:done], dist
 
 
-def _fill(X, tree_x, dist, level):
+@jit
+def _fill_cells(X, dist, level, cell_of, near_start, near, pt_start, pt, pt_xyz, reach):
+    """Add points, farthest first, while ``dist`` exceeds ``level`` (in place), by the cells.
+
+    Returns the added points and ``-1``, or stops before a point whose ball the cells cannot
+    settle as the kd-tree's ball query would and returns it instead of ``-1``: its radius
+    reaches beyond the cells, or a point whose distance would drop lies within rounding of the
+    ball's edge (the kd-tree may leave it out).
+    """
+    far = np.nonzero(dist > level)[0]  # only these can be added: distances only drop
+    out = np.empty(far.size, dtype=np.int64)
+    done = 0
+    while True:
+        x = -1
+        r = level
+        live = 0
+        for t in range(far.size):  # the first farthest, as np.argmax; drop those now within
+            y = far[t]
+            if dist[y] > level:
+                far[live] = y
+                live += 1
+                if dist[y] > r:
+                    r = dist[y]
+                    x = y
+        far = far[:live]
+        if x < 0:
+            return out[:done], -1
+        if not r < reach:
+            return out[:done], x
+        r2 = r * r
+        q = X[x]
+        cell = cell_of[x]
+        for u in range(near_start[cell], near_start[cell + 1]):
+            v = near[u]
+            for i in range(pt_start[v], pt_start[v + 1]):
+                s = cell_grid.sq_dist(pt_xyz, i, q)
+                if r2 * (1.0 - cell_grid.TOL) <= s <= r2 * (1.0 + cell_grid.TOL) and \
+                        np.sqrt(s) < dist[pt[i]]:
+                    return out[:done], x
+        for u in range(near_start[cell], near_start[cell + 1]):
+            v = near[u]
+            for i in range(pt_start[v], pt_start[v + 1]):
+                d = np.sqrt(cell_grid.sq_dist(pt_xyz, i, q))
+                if d < dist[pt[i]]:
+                    dist[pt[i]] = d
+        dist[x] = 0.0
+        out[done] = x
+        done += 1
+
+
+def _fill(X, grid, tree_x, dist, level):
     """Input points to add, farthest first, until all of ``dist`` is within ``level``
-    (``dist`` is updated in place)."""
+    (``dist`` is updated in place): each added point lowers the distance of the points within
+    its own to its distance from them. By the cells; a point they cannot settle by the
+    kd-tree's ball query (``tree_x()`` builds it once)."""
     added = []
     while True:
-        x = int(np.argmax(dist))
-        r = dist[x]
-        if not r > level:
-            return np.asarray(added, dtype=np.int64)
-        added.append(x)
-        near = np.asarray(tree_x.query_ball_point(X[x], r), dtype=np.int64)
+        got, x = _fill_cells(X, dist, level, grid.cell_of, grid.near_start, grid.near,
+                             grid.pt_start, grid.pt, grid.pt_xyz, grid.reach)
+        added.append(got)
+        if x < 0:
+            return np.concatenate(added)
+        near = np.asarray(tree_x().query_ball_point(X[x], dist[x]), dtype=np.int64)
         if near.size:
             d = np.linalg.norm(X[near] - X[x], axis=1)
             np.minimum.at(dist, near, d)
         dist[x] = 0.0
+        added.append(np.array([x], dtype=np.int64))
+
+
+def _nearest(X, grid, cand, tree_c, counted, k, level, removable, watched):
+    """The nearest candidate of every input point, and the ``k`` nearest within ``level`` of
+    each row that may lose its nearest, as ``cKDTree(X[cand]).query`` gives them: by the cells,
+    the ambiguous ones (:mod:`.cell_grid`) by the kd-tree (``tree_c()`` builds it once).
+
+    ``counted``: ``(ids, xyz, cell)`` of the points that take part, cell by cell. Marks the
+    nearest candidate of each watched point beyond ``level`` not ``removable`` (in place).
+    Returns ``d1`` (n,) (0 where not counted), ``rows`` (the counted points whose nearest is
+    removable, in the order of ``counted``) and their lists ``nd`` / ``nbr`` (rows, k).
+    """
+    ids, Q, q_cell = counted
+    start, slot, xyz = grid.members(X, cand)
+    d, o, amb1, nd, nbr, amb = cell_grid.nearest(
+        Q, q_cell, grid.near_start, grid.near, start, slot, xyz, grid.reach * grid.reach, k,
+        level, cand.size)
+    if amb1.any():
+        a = np.flatnonzero(amb1)
+        d[a], o[a] = tree_c().query(Q[a])
+    far = watched[ids] & (d > level)
+    removable[o[far]] = False  # a watched point beyond the level keeps its nearest
+    sel = np.flatnonzero(removable[o])
+    nd, nbr, amb = cell_grid.take_rows(nd, nbr, amb, sel)
+    rows = ids[sel]
+    if amb.any():
+        a = np.flatnonzero(amb)
+        da, ia = tree_c().query(X[rows[a]], k=k, distance_upper_bound=level)
+        nd[a] = da.reshape(a.size, k)
+        nbr[a] = ia.reshape(a.size, k)
+    d1 = np.zeros(X.shape[0])
+    d1[ids] = d
+    return d1, rows, nd, nbr
+
+
+def _once(make):
+    """A function that calls ``make()`` the first time and returns its result ever after."""
+    got = []
+
+    def get():
+        if not got:
+            got.append(make())
+        return got[0]
+    return get
 
 
 def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=0.05,
@@ -194,9 +301,12 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
 
     Notes
     -----
-    Cost per round: a kd-tree over the kept set, a nearest query of every input point and a
-    ``k``-nearest query of those whose nearest kept point may go (O(n log n)); one ball query
-    per added point; an indexed heap over the kept points. ~0.3 s for 16k points at 20 %.
+    Cost: once, a kd-tree nearest query of every input point and a grid of cells (O(n log n)).
+    Per round, O(n): the candidates sorted into the cells, for every input point the
+    candidates in the 27 cells around it (a few dozen), the ball of each added point the same
+    way; a kd-tree over the candidates only for points whose answer hangs on equal distances
+    (~1 % on quantised scans); an indexed heap over the kept points. ~0.06 s for 16k points at
+    20 %, ~0.5 s for 100k (one core; ~2.7x less than the kd-tree version's).
     """
     X = np.ascontiguousarray(X, dtype=np.float64)
     keep = np.asarray(keep, dtype=bool).copy()
@@ -213,30 +323,29 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
     info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
     if not (keep & ~fixed).any() or not (addable & ~keep).any():
         return keep, info  # nothing may go, or nothing to add
-    tree_x = cKDTree(X)
     dist, _ = cKDTree(X[keep]).query(X)
     dist[ignored] = 0.0
     H = float(dist[~watched].max())
     info["hausdorff_before"] = H
+    if not H > 0:
+        return keep, info
+    # cells that hold every radius asked below: H only drops, and levels are below it
+    grid = cell_grid.CellGrid(X, H * (1.0 + 4.0 * cell_grid.COVER))
+    tree_x = _once(lambda: cKDTree(X))
+    ids = grid.pt[~ignored[grid.pt]]  # the points that count, cell by cell
+    counted = (ids, np.ascontiguousarray(X[ids]), grid.cell_of[ids])
     while info["rounds"] < max_rounds and step >= min_step and H > 0:
         info["rounds"] += 1
         level = (1.0 - step) * H
         trial = dist.copy()
         trial[watched] = 0.0  # not filled for: another tile's
-        added = _fill(X, tree_x, trial, level)
+        added = _fill(X, grid, tree_x, trial, level)
         cand = np.concatenate([np.flatnonzero(keep), added])
         removable = ~fixed[cand]
         removable[cand.size - added.size:] = False
-        tree_c = cKDTree(X[cand])
-        d1, o1 = tree_c.query(X)
-        d1[ignored] = 0.0
-        far = watched & (d1 > level)
-        removable[o1[far]] = False  # a watched point beyond the level keeps its nearest
-        rows = np.flatnonzero(removable[o1] & ~ignored)  # only these can lose their nearest
-        kq = min(k, cand.size)
-        nd, nbr = tree_c.query(X[rows], k=kq, distance_upper_bound=level)
-        nd = np.ascontiguousarray(nd.reshape(rows.size, kq))
-        nbr = np.ascontiguousarray(nbr.reshape(rows.size, kq), dtype=np.int64)
+        tree_c = _once(lambda: cKDTree(X[cand]))
+        d1, rows, nd, nbr = _nearest(X, grid, cand, tree_c, counted, min(k, cand.size), level,
+                                     removable, watched)
         gone, d_rows = thin_below(nbr, nd, removable,
                                   np.ascontiguousarray(tie[cand], dtype=np.uint64), level,
                                   added.size)

@@ -1,0 +1,242 @@
+"""Exact nearest searches among a changing subset of points, on a grid of cubic cells.
+
+The gap refinement (:mod:`.refine`) asks, round after round, which *candidates* (a subset of
+the input points that changes every round) lie nearest each input point, within a radius that
+never grows. A kd-tree over each round's candidates answers that, but costs a build and a full
+query per round. Here a grid of cubic cells of side ``h`` (at least every radius asked) is
+built once over the input points; each round the candidates are sorted into its cells (a
+counting sort) and a search visits the (non-empty) cells among the 27 around a point's cell.
+
+**Same answers as** ``scipy.spatial.cKDTree`` **on the same candidates.** Distances are
+computed as cKDTree computes them (``((dx² + dy²) + dz²)``, then the square root), bit for bit,
+so every distance and every comparison with a bound is the same (a test checks it against the
+installed scipy). cKDTree orders equal distances by the layout of its tree, and rounding in
+its cell bounds could decide between two distances a few ulps apart, so a search whose answer
+depends on the order of two distances within a relative ``TOL`` of each other (or of a bound)
+is flagged *ambiguous*: the caller asks the kd-tree for those points only (on a quantised
+100k-point LiDAR scan, under 1 % of them).
+"""
+
+import numpy as np
+
+from ._jit import jit, jit_inline
+
+#: relative margin under which two squared distances (or one and a bound) count as tied
+TOL = 1e-9
+#: a point within (1 - COVER) h of another, in every coordinate, is at most one cell away
+#: (rounding of the cell index is far below this for up to MAX_CELLS cells per axis)
+COVER = 1e-7
+MAX_CELLS = 1 << 20
+
+
+class CellGrid:
+    """Cells of side ``h`` over ``X``, built once (O(n log n)).
+
+    Attributes
+    ----------
+    h : float
+        Cell side. Every point within ``reach = (1 - COVER) · h`` of a point lies in one of
+        the 27 cells around its cell.
+    cell_of : int64 (n,)
+        Each point's cell (0 … ``n_cells`` − 1).
+    near_start, near : int64
+        CSR: the non-empty cells among the 27 around each cell (itself included).
+    pt_start, pt, pt_xyz
+        CSR: the points of each cell (``pt``, ascending), and their coordinates in that order.
+    """
+
+    def __init__(self, X, h):
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        lo = X.min(axis=0)
+        span = float((X.max(axis=0) - lo).max())
+        self.h = h = max(float(h), span / MAX_CELLS, np.finfo(float).tiny)
+        self.reach = (1.0 - COVER) * h
+        ijk = np.floor((X - lo) / h).astype(np.int64) + 1  # a layer of empty cells around
+        dims = ijk.max(axis=0) + 2
+        key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+        cells, self.cell_of = np.unique(key, return_inverse=True)
+        self.cell_of = np.ascontiguousarray(self.cell_of.ravel(), dtype=np.int64)
+        self.n_cells = cells.size
+        step = np.array([(a * dims[1] + b) * dims[2] + c for a in (-1, 0, 1)
+                         for b in (-1, 0, 1) for c in (-1, 0, 1)], dtype=np.int64)
+        want = cells[:, None] + step[None, :]
+        at = np.minimum(np.searchsorted(cells, want), cells.size - 1)
+        hit = cells[at] == want
+        self.near_start = np.zeros(self.n_cells + 1, dtype=np.int64)
+        np.cumsum(hit.sum(axis=1), out=self.near_start[1:])
+        self.near = np.ascontiguousarray(at[hit], dtype=np.int64)
+        self.pt_start, self.pt = bucket(self.cell_of, np.arange(X.shape[0]), self.n_cells)
+        self.pt_xyz = np.ascontiguousarray(X[self.pt])
+
+    def members(self, X, ids):
+        """The points ``ids`` sorted into the cells: ``(start, slot, xyz)`` with ``slot`` the
+        position in ``ids`` of each, cell by cell, and ``xyz`` their coordinates."""
+        start, slot = bucket(self.cell_of[ids], np.arange(ids.size), self.n_cells)
+        return start, slot, np.ascontiguousarray(X[ids[slot]])
+
+
+@jit
+def _bucket(cell, items, n_cells):
+    start = np.zeros(n_cells + 1, dtype=np.int64)
+    for i in range(cell.size):
+        start[cell[i] + 1] += 1
+    for c in range(n_cells):
+        start[c + 1] += start[c]
+    fill = start[:n_cells].copy()
+    out = np.empty(items.size, dtype=np.int64)
+    for i in range(cell.size):
+        out[fill[cell[i]]] = items[i]
+        fill[cell[i]] += 1
+    return start, out
+
+
+def bucket(cell, items, n_cells):
+    """CSR of ``items`` by ``cell`` (counting sort, stable): ``(start, items in cell order)``."""
+    return _bucket(np.ascontiguousarray(cell, dtype=np.int64),
+                   np.ascontiguousarray(items, dtype=np.int64), n_cells)
+
+
+@jit_inline
+def sq_dist(xyz, i, q):
+    """Squared distance from row ``i`` of ``xyz`` to ``q``, rounded as cKDTree rounds it."""
+    d0 = xyz[i, 0] - q[0]
+    d1 = xyz[i, 1] - q[1]
+    d2 = xyz[i, 2] - q[2]
+    return d0 * d0 + d1 * d1 + d2 * d2
+
+
+@jit
+def _gather(cell, near_start, near, start, slot, xyz, buf_xyz, buf_id):
+    """Copy the members of the cells around ``cell`` into ``buf_xyz`` / ``buf_id`` (grown if
+    too small); returns the buffers and the count."""
+    cnt = 0
+    for u in range(near_start[cell], near_start[cell + 1]):
+        cnt += start[near[u] + 1] - start[near[u]]
+    if cnt > buf_id.size:
+        buf_xyz = np.empty((2 * cnt, 3))
+        buf_id = np.empty(2 * cnt, dtype=np.int64)
+    cnt = 0
+    for u in range(near_start[cell], near_start[cell + 1]):
+        v = near[u]
+        for i in range(start[v], start[v + 1]):
+            buf_xyz[cnt, 0] = xyz[i, 0]
+            buf_xyz[cnt, 1] = xyz[i, 1]
+            buf_xyz[cnt, 2] = xyz[i, 2]
+            buf_id[cnt] = slot[i]
+            cnt += 1
+    return buf_xyz, buf_id, cnt
+
+
+@jit
+def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, none):
+    """Nearest members of each query point ``Q`` (q, 3), as cKDTree gives them: the nearest
+    (``query(k=1)``) and the ``k`` nearest closer than ``bound``, nearest first
+    (``query(k=k, distance_upper_bound=bound)``: missing ones are ``none``, the member count,
+    at distance inf).
+
+    ``q_cell``: the cell of each query point; queries in the same cell one after another
+    (e.g. in the order of :attr:`CellGrid.pt`) share one gathering of the members around it,
+    and reading and writing in that order is cache-friendly. ``start`` / ``slot`` / ``xyz``:
+    the members sorted into the cells (:meth:`CellGrid.members`); ``reach2``: the squared
+    reach of the cells.
+
+    Returns
+    -------
+    d1, i1, amb1 : (q,)
+        Distance to and id of the nearest member; ``amb1``: it is not surely nearer than
+        ``reach`` (not surely seen) or not clearly nearer than the next (then undefined).
+    dist, idx, amb : (q, k), (q, k), (q,)
+        The list; ``amb``: it depends on the order of two squared distances within ``TOL``
+        of each other (among the listed ones and the next), a listed one lies within ``TOL``
+        of ``bound²``, or ``bound`` is not surely below ``reach`` (then undefined).
+
+    Notes
+    -----
+    Each member seen costs one distance and, if closer than ``bound``, an insertion into a
+    sorted list of ``k + 1``.
+    """
+    nq = Q.shape[0]
+    b2 = bound * bound  # as cKDTree squares its bound
+    keep2 = b2 * (1.0 + TOL)  # also collect the ones just beyond: they decide ambiguity
+    d1 = np.full(nq, np.inf)
+    i1 = np.full(nq, -1, dtype=np.int64)
+    amb1 = np.zeros(nq, dtype=np.bool_)
+    dist = np.full((nq, k), np.inf)
+    idx = np.full((nq, k), none, dtype=np.int64)
+    amb = np.zeros(nq, dtype=np.bool_)
+    all_amb = not keep2 * (1.0 + TOL) < reach2
+    buf_xyz = np.empty((64, 3))
+    buf_id = np.empty(64, dtype=np.int64)
+    cnt = 0
+    bs = np.empty(k + 1)
+    bi = np.empty(k + 1, dtype=np.int64)
+    for t in range(nq):
+        if t == 0 or q_cell[t] != q_cell[t - 1]:
+            buf_xyz, buf_id, cnt = _gather(q_cell[t], near_start, near, start, slot, xyz,
+                                           buf_xyz, buf_id)
+        qx = Q[t, 0]
+        qy = Q[t, 1]
+        qz = Q[t, 2]
+        s1 = np.inf
+        s2 = np.inf
+        c1 = -1
+        nb = 0
+        for i in range(cnt):
+            e0 = buf_xyz[i, 0] - qx
+            e1 = buf_xyz[i, 1] - qy
+            e2 = buf_xyz[i, 2] - qz
+            s = e0 * e0 + e1 * e1 + e2 * e2  # as cKDTree rounds it
+            if s < s2:
+                if s < s1:
+                    s2 = s1
+                    s1 = s
+                    c1 = buf_id[i]
+                else:
+                    s2 = s
+            if s >= keep2 or (nb == k + 1 and s >= bs[k]):
+                continue
+            j = nb if nb < k + 1 else k  # insertion into the sorted list
+            while j > 0 and bs[j - 1] > s:
+                bs[j] = bs[j - 1]
+                bi[j] = bi[j - 1]
+                j -= 1
+            bs[j] = s
+            bi[j] = buf_id[i]
+            if nb < k + 1:
+                nb += 1
+        if s2 > reach2:
+            s2 = reach2  # a member beyond reach may be unseen
+        if c1 < 0 or not s2 > s1 * (1.0 + TOL):
+            amb1[t] = True
+        else:
+            d1[t] = np.sqrt(s1)
+            i1[t] = c1
+        n_in = 0
+        while n_in < nb and n_in < k and bs[n_in] < b2:
+            n_in += 1
+        bad = all_amb or (n_in > 0 and not bs[n_in - 1] < b2 * (1.0 - TOL))  # the bound
+        last = n_in if n_in < nb else n_in - 1  # the listed ones and the next, if any
+        for j in range(last):
+            if not bs[j + 1] > bs[j] * (1.0 + TOL):
+                bad = True  # two (nearly) equal: the kd-tree's order is its own
+        if bad:
+            amb[t] = True
+            continue
+        for j in range(n_in):
+            dist[t, j] = np.sqrt(bs[j])
+            idx[t, j] = bi[j]
+    return d1, i1, amb1, dist, idx, amb
+
+
+@jit
+def take_rows(dist, idx, amb, rows):
+    """Keep rows ``rows`` (increasing) of ``dist`` / ``idx`` / ``amb``, moved up in place;
+    returns the leading views (no copy of the lists)."""
+    for j in range(rows.size):
+        t = rows[j]
+        if t != j:
+            dist[j] = dist[t]
+            idx[j] = idx[t]
+            amb[j] = amb[t]
+    r = rows.size
+    return dist[:r], idx[:r], amb[:r]
