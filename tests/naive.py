@@ -246,7 +246,7 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
     """:func:`tiledsimplify.core.refine.refine_coverage` with every search a scipy kd-tree
     query, as it was first written: a fill by ball queries, and per round a kd-tree over the
     candidates, a nearest query of every input point and a ``k``-nearest query of the rows."""
-    from tiledsimplify.core.refine import thin_below
+    from tiledsimplify.core.refine import lists_from_dense, thin_below
     X = np.ascontiguousarray(X, dtype=np.float64)
     keep = np.asarray(keep, dtype=bool).copy()
     fixed = np.asarray(fixed, dtype=bool) & keep
@@ -293,9 +293,7 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         rows = np.flatnonzero(removable[o1] & ~ignored)
         kq = min(k, cand.size)
         nd, nbr = tree_c.query(X[rows], k=kq, distance_upper_bound=level)
-        nd = np.ascontiguousarray(nd.reshape(rows.size, kq))
-        nbr = np.ascontiguousarray(nbr.reshape(rows.size, kq), dtype=np.int64)
-        gone, d_rows = thin_below(nbr, nd, removable,
+        gone, d_rows = thin_below(*lists_from_dense(nd, nbr, cand.size), removable,
                                   np.ascontiguousarray(tie[cand], dtype=np.uint64), level,
                                   added.size)
         if gone.size < added.size:

@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 
 from tiledsimplify.core import cell_grid
 from tiledsimplify.core.heap import coordinate_hash
-from tiledsimplify.core.refine import refine_coverage
+from tiledsimplify.core.refine import lists_from_dense, refine_coverage
 
 import naive
 
@@ -29,27 +29,32 @@ def test_nearest_equals_kdtree_where_unambiguous(name, X):
     ids = np.sort(rng.choice(len(X), len(X) // 5, replace=False))
     reach = cKDTree(X[ids]).query(X)[0].max()
     grid = cell_grid.CellGrid(X, reach * 1.01)
-    start, slot, xyz = grid.members(X, ids)
+    start_c, slot, xyz = grid.members(X, ids)
     order = grid.pt  # queries cell by cell, as the refinement asks them
     tree = cKDTree(X[ids])
     rd, ri = tree.query(X[order])
     n_amb = 0
     for k, bound in ((16, 0.9 * reach), (4, 0.6 * reach), (16, 0.2 * reach), (16, 1.1 * reach)):
-        d, i, amb1, D, Idx, amb = cell_grid.nearest(
-            X[order], grid.cell_of[order], grid.near_start, grid.near, start, slot, xyz,
-            grid.reach ** 2, k, bound, ids.size)
+        d, i, amb1, start, idx, dist, amb = cell_grid.nearest(
+            X[order], grid.cell_of[order], grid.near_start, grid.near, start_c, slot, xyz,
+            grid.reach ** 2, k, bound)
         np.testing.assert_array_equal(d[~amb1], rd[~amb1])  # bit for bit
         np.testing.assert_array_equal(i[~amb1], ri[~amb1])
-        RD, RI = tree.query(X[order], k=k, distance_upper_bound=bound)
-        np.testing.assert_array_equal(D[~amb], RD[~amb])
-        np.testing.assert_array_equal(Idx[~amb], RI[~amb])
+        r_start, r_idx, r_dist = lists_from_dense(
+            *tree.query(X[order], k=k, distance_upper_bound=bound), ids.size)
+        for t in np.flatnonzero(~amb):
+            a, b = start[t], start[t + 1]
+            ra, rb = r_start[t], r_start[t + 1]
+            assert idx[a:b].tolist() == r_idx[ra:rb].tolist()
+            assert dist[a:b].tolist() == r_dist[ra:rb].tolist()  # bit for bit
+        assert (start[1:][amb] == start[:-1][amb]).all()  # flagged lists are left empty
         if bound > grid.reach:
             assert amb.all()  # beyond the cells: nothing is claimed
         else:
             n_amb += amb.sum() + amb1.sum()
             # an unflagged list has no two equal distances
-            fin = np.where(np.isfinite(D[~amb]), D[~amb] ** 2, np.nan)
-            assert not (np.diff(fin, axis=1) == 0).any()
+            for t in np.flatnonzero(~amb):
+                assert (np.diff(dist[start[t]:start[t + 1]]) > 0).all()
     if name in ("random", "wavy"):
         assert n_amb == 0
     else:
@@ -101,3 +106,4 @@ def test_refine_coverage_of_a_tile_equals_the_kdtree_version(name, X):
         assert np.array_equal(got, expect)
         assert info == expect_info
         assert info["swaps"] > 0
+

@@ -6,7 +6,7 @@ from scipy.spatial import cKDTree
 
 from tiledsimplify import SimplifyOptions, simplify_points
 from tiledsimplify.core.heap import coordinate_hash
-from tiledsimplify.core.refine import refine_coverage, thin_below
+from tiledsimplify.core.refine import lists_from_dense, refine_coverage, thin_below
 
 import naive
 
@@ -36,8 +36,8 @@ def test_thin_below_matches_naive(seed):
     nd, nbr = cKDTree(X[cand]).query(X, k=cand.size)  # full lists: no search cut-off
     d1 = nd[:, 0]
     for level in (np.quantile(d1, 0.9) * 1.5, np.max(d1) * 3):
-        gone, dist = thin_below(np.ascontiguousarray(nbr, dtype=np.int64), nd, removable, tie,
-                                level, 30)
+        gone, dist = thin_below(*lists_from_dense(nd, nbr, cand.size), removable, tie, level,
+                                30)
         expect = naive.thin_below(X, cand, removable, tie, level, 30)
         assert gone.tolist() == expect.tolist()
         alive = np.ones(cand.size, bool)
@@ -48,19 +48,19 @@ def test_thin_below_matches_naive(seed):
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_thin_below_on_short_lists_matches_recomputing_every_step(seed):
-    # lists cut at k and at a search radius, as refine_coverage builds them: the owner lists
-    # and gaps maintained under removal equal owners and gaps recomputed after each removal
+    # lists cut at k and at a search radius (some empty), as refine_coverage builds them: the
+    # owner lists and gaps maintained under removal equal those recomputed after each removal
     rng = np.random.default_rng(seed)
     X = _wavy(200, seed)
     cand = np.sort(rng.choice(200, 60, replace=False))
     removable = rng.random(60) < 0.8
     tie = rng.integers(0, 4, 60).astype(np.uint64)  # many equal ties: the id decides
     d1 = cKDTree(X[cand]).query(X)[0]
-    for k, radius in ((3, np.inf), (5, 1.5 * d1.max()), (8, 1.1 * d1.max())):
+    for k, radius in ((3, np.inf), (5, 1.5 * d1.max()), (8, 1.1 * d1.max()), (4, 0.8 * d1.max())):
         nd, nbr = cKDTree(X[cand]).query(X, k=k, distance_upper_bound=radius)
         nbr = np.ascontiguousarray(nbr, dtype=np.int64)
         for level in (np.quantile(d1, 0.9), 2 * d1.max()):
-            gone, dist = thin_below(nbr, nd, removable, tie, level, 40)
+            gone, dist = thin_below(*lists_from_dense(nd, nbr, 60), removable, tie, level, 40)
             expect, expect_dist = naive.thin_lists(nbr, nd, removable, tie, level, 40)
             assert gone.tolist() == expect.tolist()
             np.testing.assert_array_equal(dist, expect_dist)

@@ -128,11 +128,10 @@ def _gather(cell, near_start, near, start, slot, xyz, buf_xyz, buf_id):
 
 
 @jit
-def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, none):
+def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound):
     """Nearest members of each query point ``Q`` (q, 3), as cKDTree gives them: the nearest
     (``query(k=1)``) and the ``k`` nearest closer than ``bound``, nearest first
-    (``query(k=k, distance_upper_bound=bound)``: missing ones are ``none``, the member count,
-    at distance inf).
+    (``query(k=k, distance_upper_bound=bound)``).
 
     ``q_cell``: the cell of each query point; queries in the same cell one after another
     (e.g. in the order of :attr:`CellGrid.pt`) share one gathering of the members around it,
@@ -145,10 +144,13 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, non
     d1, i1, amb1 : (q,)
         Distance to and id of the nearest member; ``amb1``: it is not surely nearer than
         ``reach`` (not surely seen) or not clearly nearer than the next (then undefined).
-    dist, idx, amb : (q, k), (q, k), (q,)
-        The list; ``amb``: it depends on the order of two squared distances within ``TOL``
-        of each other (among the listed ones and the next), a listed one lies within ``TOL``
-        of ``bound²``, or ``bound`` is not surely below ``reach`` (then undefined).
+    start, idx, dist : CSR
+        The lists (``idx[start[t]:start[t + 1]]``; at most ``k``, fewer where fewer lie
+        within ``bound``).
+    amb : (q,)
+        The list depends on the order of two squared distances within ``TOL`` of each other
+        (among the listed ones and the next), a listed one lies within ``TOL`` of
+        ``bound²``, or ``bound`` is not surely below ``reach``; then it is left empty.
 
     Notes
     -----
@@ -161,12 +163,15 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, non
     d1 = np.full(nq, np.inf)
     i1 = np.full(nq, -1, dtype=np.int64)
     amb1 = np.zeros(nq, dtype=np.bool_)
-    dist = np.full((nq, k), np.inf)
-    idx = np.full((nq, k), none, dtype=np.int64)
+    l_start = np.zeros(nq + 1, dtype=np.int64)
+    l_idx = np.empty(nq * k, dtype=np.int64)  # pages only touched as used: ~3 per query
+    l_dist = np.empty(nq * k)
     amb = np.zeros(nq, dtype=np.bool_)
     all_amb = not keep2 * (1.0 + TOL) < reach2
     buf_xyz = np.empty((64, 3))
     buf_id = np.empty(64, dtype=np.int64)
+    sq = np.empty(64)
+    near_ones = np.empty(64, dtype=np.int64)
     cnt = 0
     bs = np.empty(k + 1)
     bi = np.empty(k + 1, dtype=np.int64)
@@ -174,28 +179,28 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, non
         if t == 0 or q_cell[t] != q_cell[t - 1]:
             buf_xyz, buf_id, cnt = _gather(q_cell[t], near_start, near, start, slot, xyz,
                                            buf_xyz, buf_id)
+            if sq.size < buf_id.size:
+                sq = np.empty(buf_id.size)
+                near_ones = np.empty(buf_id.size, dtype=np.int64)
         qx = Q[t, 0]
         qy = Q[t, 1]
         qz = Q[t, 2]
-        s1 = np.inf
-        s2 = np.inf
-        c1 = -1
-        nb = 0
-        for i in range(cnt):
+        m = 0
+        for i in range(cnt):  # branch-free: every distance, and which are within keep2
             e0 = buf_xyz[i, 0] - qx
             e1 = buf_xyz[i, 1] - qy
             e2 = buf_xyz[i, 2] - qz
             s = e0 * e0 + e1 * e1 + e2 * e2  # as cKDTree rounds it
-            if s < s2:
-                if s < s1:
-                    s2 = s1
-                    s1 = s
-                    c1 = buf_id[i]
-                else:
-                    s2 = s
-            if s >= keep2 or (nb == k + 1 and s >= bs[k]):
+            sq[i] = s
+            near_ones[m] = i
+            m += s < keep2
+        nb = 0
+        for u in range(m):  # the k + 1 nearest of those, sorted
+            i = near_ones[u]
+            s = sq[i]
+            if nb == k + 1 and s >= bs[k]:
                 continue
-            j = nb if nb < k + 1 else k  # insertion into the sorted list
+            j = nb if nb < k + 1 else k
             while j > 0 and bs[j - 1] > s:
                 bs[j] = bs[j - 1]
                 bi[j] = bi[j - 1]
@@ -204,6 +209,22 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, non
             bi[j] = buf_id[i]
             if nb < k + 1:
                 nb += 1
+        if nb >= 2:
+            s1 = bs[0]
+            s2 = bs[1]
+            c1 = bi[0]
+        else:  # the nearest two among all seen
+            s1 = np.inf
+            a = -1
+            for i in range(cnt):
+                if sq[i] < s1:
+                    s1 = sq[i]
+                    a = i
+            s2 = np.inf
+            for i in range(cnt):
+                if i != a and sq[i] < s2:
+                    s2 = sq[i]
+            c1 = buf_id[a] if a >= 0 else -1
         if s2 > reach2:
             s2 = reach2  # a member beyond reach may be unseen
         if c1 < 0 or not s2 > s1 * (1.0 + TOL):
@@ -219,24 +240,12 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, non
         for j in range(last):
             if not bs[j + 1] > bs[j] * (1.0 + TOL):
                 bad = True  # two (nearly) equal: the kd-tree's order is its own
+        used = l_start[t]
         if bad:
             amb[t] = True
-            continue
+            n_in = 0
         for j in range(n_in):
-            dist[t, j] = np.sqrt(bs[j])
-            idx[t, j] = bi[j]
-    return d1, i1, amb1, dist, idx, amb
-
-
-@jit
-def take_rows(dist, idx, amb, rows):
-    """Keep rows ``rows`` (increasing) of ``dist`` / ``idx`` / ``amb``, moved up in place;
-    returns the leading views (no copy of the lists)."""
-    for j in range(rows.size):
-        t = rows[j]
-        if t != j:
-            dist[j] = dist[t]
-            idx[j] = idx[t]
-            amb[j] = amb[t]
-    r = rows.size
-    return dist[:r], idx[:r], amb[:r]
+            l_dist[used + j] = np.sqrt(bs[j])
+            l_idx[used + j] = bi[j]
+        l_start[t + 1] = used + n_in
+    return d1, i1, amb1, l_start, l_idx, l_dist, amb

@@ -43,43 +43,43 @@ from ._jit import jit
 
 
 @jit
-def _first_alive(row, alive, j):
-    """Index of the first ``alive`` candidate in ``row`` at or after ``j`` (-1: none)."""
-    while j < row.size:
-        if alive[row[j]]:
+def _first_alive(nbr, alive, j, end):
+    """Position of the first ``alive`` candidate in ``nbr[j:end]`` (-1: none)."""
+    while j < end:
+        if alive[nbr[j]]:
             return j
         j += 1
     return -1
 
 
 @jit
-def _gap(c, nbr, nd, owner, alive, head, nxt):
+def _gap(c, start, nbr, nd, owner, alive, head, nxt):
     """The largest distance an input point owned by ``c`` would have to its next candidate if
-    ``c`` were removed (inf if one has none among its ``k``)."""
+    ``c`` were removed (inf if one has none in its list)."""
     worst = 0.0
     x = head[c]
     while x >= 0:
-        j = _first_alive(nbr[x], alive, owner[x] + 1)
+        j = _first_alive(nbr, alive, owner[x] + 1, start[x + 1])
         if j < 0:
             return np.inf
-        if nd[x, j] > worst:
-            worst = nd[x, j]
+        if nd[j] > worst:
+            worst = nd[j]
         x = nxt[x]
     return worst
 
 
 @jit
-def thin_below(nbr, nd, removable, tie, level, n_remove):
+def thin_below(start, nbr, nd, removable, tie, level, n_remove):
     """Remove up to ``n_remove`` candidates, smallest gap first, never leaving an input point
     farther than ``level`` from its nearest remaining candidate.
 
-    ``nbr`` / ``nd`` (r, k): for the input points that may change owner, their ``k`` nearest
-    candidates (ids into the candidate set, nearest first; id ``m`` and distance inf where
-    fewer lie within the search radius) and the distances. ``removable`` (m,) marks the
-    candidates that may go; ``tie`` (uint64, m) breaks equal gaps. A row is *owned* by its
-    nearest remaining candidate; the gap of a candidate is the largest distance a row it owns
-    would have to its next candidate. Gaps only grow as candidates go, so the queue is kept up
-    to date lazily: a candidate's gap is recomputed when it reaches the top.
+    ``start`` / ``nbr`` / ``nd`` (CSR, :func:`lists_from_dense`): for each input point that
+    may change owner (a *row*), its nearest candidates (ids into the candidate set, nearest
+    first; at most ``k``, those within the search radius) and their distances. ``removable``
+    (m,) marks the candidates that may go; ``tie`` (uint64, m) breaks equal gaps. A row is
+    *owned* by its nearest remaining candidate; the gap of a candidate is the largest distance
+    a row it owns would have to its next candidate. Gaps only grow as candidates go, so the
+    queue is kept up to date lazily: a candidate's gap is recomputed when it reaches the top.
 
     Each candidate's owned rows are a linked list (``head`` / ``nxt``; a row is in one list at
     a time), so a gap costs the few rows a candidate owns, not every row that lists it; the
@@ -90,27 +90,27 @@ def thin_below(nbr, nd, removable, tie, level, n_remove):
     removed : int64
         The removed candidates, in order.
     dist : float64 (r,)
-        Each row's distance to its nearest remaining candidate (inf if none is left among
-        its ``k``; cannot happen to a row that started with one within ``level``).
+        Each row's distance to its nearest remaining candidate (inf if none is left in its
+        list; cannot happen to a row that started with one within ``level``).
     """
-    r, k = nbr.shape
+    r = start.size - 1
     m = removable.size
-    alive = np.ones(m + 1, dtype=np.bool_)
-    alive[m] = False  # id m: no candidate (beyond the search radius)
-    owner = np.zeros(r, dtype=np.int64)  # position in the row of its owner; -1: none left
-    head = np.full(m + 1, -1, dtype=np.int64)
+    alive = np.ones(m, dtype=np.bool_)
+    owner = np.full(r, -1, dtype=np.int64)  # position of the row's owner in nbr; -1: none
+    head = np.full(m, -1, dtype=np.int64)
     nxt = np.full(r, -1, dtype=np.int64)
     key = np.zeros(m)
     for x in range(r - 1, -1, -1):
-        c = nbr[x, 0]
-        if c < m:
-            nxt[x] = head[c]
-            head[c] = x
-            if removable[c]:
-                j = _first_alive(nbr[x], alive, 1)
-                g = nd[x, j] if j >= 0 else np.inf
-                if g > key[c]:
-                    key[c] = g
+        if start[x] == start[x + 1]:
+            continue
+        owner[x] = start[x]
+        c = nbr[start[x]]
+        nxt[x] = head[c]
+        head[c] = x
+        if removable[c]:
+            g = nd[start[x] + 1] if start[x] + 1 < start[x + 1] else np.inf
+            if g > key[c]:
+                key[c] = g
     items = np.nonzero(removable)[0]
     hp, pos = heap.new(m)
     size = heap.build(hp, pos, key, tie, items)
@@ -118,7 +118,7 @@ def thin_below(nbr, nd, removable, tie, level, n_remove):
     done = 0
     while done < out.size and size > 0:
         c = hp[0]
-        g = _gap(c, nbr, nd, owner, alive, head, nxt)
+        g = _gap(c, start, nbr, nd, owner, alive, head, nxt)
         if g > key[c]:  # stale: the gap grew since it was queued
             heap.update(hp, pos, key, tie, c, g, size)
             continue
@@ -133,17 +133,44 @@ def thin_below(nbr, nd, removable, tie, level, n_remove):
         head[c] = -1
         while x >= 0:  # its rows move to their next remaining candidate
             after = nxt[x]
-            j = _first_alive(nbr[x], alive, owner[x] + 1)
+            j = _first_alive(nbr, alive, owner[x] + 1, start[x + 1])
             owner[x] = j
             if j >= 0:
-                d = nbr[x, j]
+                d = nbr[j]
                 nxt[x] = head[d]
                 head[d] = x
             x = after
     dist = np.empty(r)
     for x in range(r):
-        dist[x] = nd[x, owner[x]] if owner[x] >= 0 else np.inf
+        dist[x] = nd[owner[x]] if owner[x] >= 0 else np.inf
     return out[:done], dist
+
+
+@jit
+def _lists_from_dense(nd, nbr, none):
+    r, k = nbr.shape
+    start = np.zeros(r + 1, dtype=np.int64)
+    for x in range(r):
+        j = 0
+        while j < k and nbr[x, j] != none:
+            j += 1
+        start[x + 1] = start[x] + j
+    idx = np.empty(start[r], dtype=np.int64)
+    dist = np.empty(start[r])
+    for x in range(r):
+        for j in range(start[x + 1] - start[x]):
+            idx[start[x] + j] = nbr[x, j]
+            dist[start[x] + j] = nd[x, j]
+    return start, idx, dist
+
+
+def lists_from_dense(nd, nbr, none):
+    """CSR lists ``(start, idx, dist)`` from cKDTree's ``query(k=…)`` output ``nd`` / ``nbr``
+    (r, k), where ``none`` (the tree's size) pads the rows with fewer than ``k``."""
+    r = len(nbr)
+    nbr = np.ascontiguousarray(np.asarray(nbr).reshape(r, -1), dtype=np.int64)
+    nd = np.ascontiguousarray(np.asarray(nd, dtype=np.float64).reshape(r, -1))
+    return _lists_from_dense(nd, nbr, none)
 
 
 @jit
@@ -218,35 +245,43 @@ def _fill(X, grid, tree_x, dist, level):
 
 def _nearest(X, grid, cand, tree_c, counted, k, level, removable, watched):
     """The nearest candidate of every input point, and the ``k`` nearest within ``level`` of
-    each row that may lose its nearest, as ``cKDTree(X[cand]).query`` gives them: by the cells,
-    the ambiguous ones (:mod:`.cell_grid`) by the kd-tree (``tree_c()`` builds it once).
+    each row (a point whose nearest is removable), as ``cKDTree(X[cand]).query`` gives them:
+    by the cells, the ambiguous ones (:mod:`.cell_grid`) by the kd-tree (``tree_c()`` builds
+    it once).
 
     ``counted``: ``(ids, xyz, cell)`` of the points that take part, cell by cell. Marks the
     nearest candidate of each watched point beyond ``level`` not ``removable`` (in place).
-    Returns ``d1`` (n,) (0 where not counted), ``rows`` (the counted points whose nearest is
-    removable, in the order of ``counted``) and their lists ``nd`` / ``nbr`` (rows, k).
+
+    Returns ``d1`` (n,) (0 where not counted), the lists for :func:`thin_below`, ``rows`` and
+    ``at`` (the rows' positions among the lists). The lists are those of every counted point,
+    then the kd-tree's of the rows whose list was ambiguous (left empty at their first place).
+    The lists of points that are not rows start with their nearest candidate, which is not
+    removable, so they never change owner and take no part in any gap.
     """
     ids, Q, q_cell = counted
     start, slot, xyz = grid.members(X, cand)
-    d, o, amb1, nd, nbr, amb = cell_grid.nearest(
+    d, o, amb1, l_start, l_idx, l_dist, amb = cell_grid.nearest(
         Q, q_cell, grid.near_start, grid.near, start, slot, xyz, grid.reach * grid.reach, k,
-        level, cand.size)
+        level)
     if amb1.any():
         a = np.flatnonzero(amb1)
         d[a], o[a] = tree_c().query(Q[a])
     far = watched[ids] & (d > level)
     removable[o[far]] = False  # a watched point beyond the level keeps its nearest
     sel = np.flatnonzero(removable[o])
-    nd, nbr, amb = cell_grid.take_rows(nd, nbr, amb, sel)
-    rows = ids[sel]
-    if amb.any():
-        a = np.flatnonzero(amb)
-        da, ia = tree_c().query(X[rows[a]], k=k, distance_upper_bound=level)
-        nd[a] = da.reshape(a.size, k)
-        nbr[a] = ia.reshape(a.size, k)
+    redo = sel[amb[sel]]
+    at = sel.copy()
+    used = l_start[-1]
+    if redo.size:
+        f_start, f_idx, f_dist = lists_from_dense(
+            *tree_c().query(Q[redo], k=k, distance_upper_bound=level), cand.size)
+        at[amb[sel]] = ids.size + np.arange(redo.size)
+        l_start = np.concatenate([l_start, used + f_start[1:]])
+        l_idx = np.concatenate([l_idx[:used], f_idx])
+        l_dist = np.concatenate([l_dist[:used], f_dist])
     d1 = np.zeros(X.shape[0])
     d1[ids] = d
-    return d1, rows, nd, nbr
+    return d1, (l_start, l_idx, l_dist), ids[sel], at
 
 
 def _once(make):
@@ -344,9 +379,9 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         removable = ~fixed[cand]
         removable[cand.size - added.size:] = False
         tree_c = _once(lambda: cKDTree(X[cand]))
-        d1, rows, nd, nbr = _nearest(X, grid, cand, tree_c, counted, min(k, cand.size), level,
-                                     removable, watched)
-        gone, d_rows = thin_below(nbr, nd, removable,
+        d1, lists, rows, at = _nearest(X, grid, cand, tree_c, counted, min(k, cand.size),
+                                       level, removable, watched)
+        gone, d_lists = thin_below(*lists, removable,
                                   np.ascontiguousarray(tie[cand], dtype=np.uint64), level,
                                   added.size)
         if gone.size < added.size:
@@ -355,7 +390,7 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         keep[added] = True
         keep[cand[gone]] = False
         info["swaps"] += int(added.size)
-        d1[rows] = d_rows
+        d1[rows] = d_lists[at]
         dist = d1
         H = float(dist[~watched].max())
     info["hausdorff_after"] = H
