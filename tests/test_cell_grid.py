@@ -107,3 +107,19 @@ def test_refine_coverage_of_a_tile_equals_the_kdtree_version(name, X):
         assert info == expect_info
         assert info["swaps"] > 0
 
+
+def test_refine_coverage_with_coarse_cells_asks_the_kdtree_and_equals_it(monkeypatch):
+    from tiledsimplify.core import refine
+    X = list(_clouds())[3][1]
+    keep, fixed = _keeps(X, 2)
+    expect = naive.refine_coverage(X, keep, fixed)
+    monkeypatch.setattr(refine, "MAX_LOAD", 0.0)  # every search by the kd-tree
+    got = refine_coverage(X, keep, fixed)
+    assert np.array_equal(got[0], expect[0]) and got[1] == expect[1]
+
+
+def test_load_counts_the_members_around_each_query():
+    X = np.array([[0.0, 0, 0], [0.5, 0, 0], [3.0, 0, 0], [3.5, 0, 0], [9.0, 0, 0]])
+    grid = cell_grid.CellGrid(X, 1.0)
+    # from points 0 and 1 the members 0, 1 are around; from 4 none (members 0, 1, 2)
+    assert grid.load(np.array([0, 1, 2]), np.array([0, 1, 4])) == pytest.approx(4 / 3)

@@ -68,6 +68,14 @@ class CellGrid:
         self.pt_start, self.pt = bucket(self.cell_of, np.arange(X.shape[0]), self.n_cells)
         self.pt_xyz = np.ascontiguousarray(X[self.pt])
 
+    def load(self, members, queries):
+        """How many of ``members`` a search from each of ``queries`` visits, on average."""
+        if not queries.size:
+            return 0.0
+        cnt = np.bincount(self.cell_of[members], minlength=self.n_cells)
+        around = np.add.reduceat(cnt[self.near], self.near_start[:-1])
+        return float(around[self.cell_of[queries]].mean())
+
     def members(self, X, ids):
         """The points ``ids`` sorted into the cells: ``(start, slot, xyz)`` with ``slot`` the
         position in ``ids`` of each, cell by cell, and ``xyz`` their coordinates."""
