@@ -30,7 +30,7 @@ MAX_CELLS = 1 << 20
 
 
 class CellGrid:
-    """Cells of side ``h`` over ``X``, built once (O(n log n)).
+    """Cells of side ``h`` over ``X``, built once (a sort of the cell keys, O(n log n)).
 
     Attributes
     ----------
@@ -51,21 +51,10 @@ class CellGrid:
         span = float((X.max(axis=0) - lo).max())
         self.h = h = max(float(h), span / MAX_CELLS, np.finfo(float).tiny)
         self.reach = (1.0 - COVER) * h
-        ijk = np.floor((X - lo) / h).astype(np.int64) + 1  # a layer of empty cells around
-        dims = ijk.max(axis=0) + 2
-        key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-        cells, self.cell_of = np.unique(key, return_inverse=True)
-        self.cell_of = np.ascontiguousarray(self.cell_of.ravel(), dtype=np.int64)
-        self.n_cells = cells.size
-        step = np.array([(a * dims[1] + b) * dims[2] + c for a in (-1, 0, 1)
-                         for b in (-1, 0, 1) for c in (-1, 0, 1)], dtype=np.int64)
-        want = cells[:, None] + step[None, :]
-        at = np.minimum(np.searchsorted(cells, want), cells.size - 1)
-        hit = cells[at] == want
-        self.near_start = np.zeros(self.n_cells + 1, dtype=np.int64)
-        np.cumsum(hit.sum(axis=1), out=self.near_start[1:])
-        self.near = np.ascontiguousarray(at[hit], dtype=np.int64)
-        self.pt_start, self.pt = bucket(self.cell_of, np.arange(X.shape[0]), self.n_cells)
+        key, step = _cell_keys(X, lo, h)
+        self.pt = np.argsort(key, kind="stable")
+        self.cell_of, self.pt_start, self.near_start, self.near = _cells(key, self.pt, step)
+        self.n_cells = self.pt_start.size - 1
         self.pt_xyz = np.ascontiguousarray(X[self.pt])
 
     def load(self, members, queries):
@@ -81,6 +70,74 @@ class CellGrid:
         position in ``ids`` of each, cell by cell, and ``xyz`` their coordinates."""
         start, slot = bucket(self.cell_of[ids], np.arange(ids.size), self.n_cells)
         return start, slot, np.ascontiguousarray(X[ids[slot]])
+
+
+@jit
+def _cell_keys(X, lo, h):
+    """Each point's cell as one int64 key (a layer of empty cells around), and the key steps
+    to the 27 cells around a cell."""
+    n = X.shape[0]
+    ijk = np.empty((n, 3), dtype=np.int64)
+    top = np.zeros(3, dtype=np.int64)
+    for i in range(n):
+        for d in range(3):
+            ijk[i, d] = np.int64(np.floor((X[i, d] - lo[d]) / h)) + 1
+            top[d] = max(top[d], ijk[i, d])
+    dims = top + 2
+    key = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        key[i] = (ijk[i, 0] * dims[1] + ijk[i, 1]) * dims[2] + ijk[i, 2]
+    step = np.empty(27, dtype=np.int64)
+    u = 0
+    for a in range(-1, 2):
+        for b in range(-1, 2):
+            for c in range(-1, 2):
+                step[u] = (a * dims[1] + b) * dims[2] + c
+                u += 1
+    return key, step
+
+
+@jit
+def _cells(key, order, step):
+    """From the points' keys and their order by key: ``cell_of``, ``pt_start`` and the CSR of
+    the non-empty cells around each cell (one merge of the sorted keys per step)."""
+    n = key.size
+    cell_of = np.empty(n, dtype=np.int64)
+    cells = np.empty(n, dtype=np.int64)
+    pt_start = np.empty(n + 1, dtype=np.int64)
+    c = -1
+    for t in range(n):
+        i = order[t]
+        if t == 0 or key[i] != cells[c]:
+            c += 1
+            cells[c] = key[i]
+            pt_start[c] = t
+        cell_of[i] = c
+    n_cells = c + 1
+    pt_start[n_cells] = n
+    around = np.full((n_cells, step.size), -1, dtype=np.int64)
+    for u in range(step.size):
+        p = 0
+        for c in range(n_cells):  # cells[c] + step[u] grows with c: one pass
+            want = cells[c] + step[u]
+            while p < n_cells and cells[p] < want:
+                p += 1
+            if p < n_cells and cells[p] == want:
+                around[c, u] = p
+    near_start = np.zeros(n_cells + 1, dtype=np.int64)
+    for c in range(n_cells):
+        cnt = 0
+        for u in range(step.size):
+            cnt += around[c, u] >= 0
+        near_start[c + 1] = near_start[c] + cnt
+    near = np.empty(near_start[n_cells], dtype=np.int64)
+    for c in range(n_cells):
+        j = near_start[c]
+        for u in range(step.size):
+            if around[c, u] >= 0:
+                near[j] = around[c, u]
+                j += 1
+    return cell_of, pt_start[:n_cells + 1].copy(), near_start, near
 
 
 @jit
