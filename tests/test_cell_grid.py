@@ -123,3 +123,26 @@ def test_load_counts_the_members_around_each_query():
     grid = cell_grid.CellGrid(X, 1.0)
     # from points 0 and 1 the members 0, 1 are around; from 4 none (members 0, 1, 2)
     assert grid.load(np.array([0, 1, 2]), np.array([0, 1, 4])) == pytest.approx(4 / 3)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_refine_coverage_on_small_odd_clouds_equals_the_kdtree_version(seed):
+    # tiny, flat, collinear far from the origin, coarse lattices; k down to 1; tiles
+    rng = np.random.default_rng(seed)
+    for trial in range(12):
+        n = int(rng.integers(2, 200))
+        X = [rng.random((n, 3)),
+             np.round(rng.random((n, 3)) * 6) / 6 * [1, 1, 0],
+             np.c_[rng.random(n), np.zeros(n), np.zeros(n)] + [5e5, 4e6, 10],
+             np.round(rng.random((n, 3)) * 10) / 10][trial % 4]
+        X = np.unique(X, axis=0)
+        keep = rng.random(len(X)) < rng.uniform(0.05, 0.6)
+        fixed = keep & (rng.random(len(X)) < 0.3)
+        kw = {"k": int(rng.choice([1, 2, 3, 16]))}
+        if trial % 3 == 0:
+            other = X[:, 0] > np.quantile(X[:, 0], 0.6)
+            fixed = fixed | other
+            kw.update(addable=~other, watch=other if trial % 2 else None)
+        got = refine_coverage(X, keep, fixed, **kw)
+        expect = naive.refine_coverage(X, keep, fixed, **kw)
+        assert np.array_equal(got[0], expect[0]) and got[1] == expect[1]
