@@ -13,8 +13,8 @@ so every distance and every comparison with a bound is the same (a test checks i
 installed scipy). cKDTree orders equal distances by the layout of its tree, and rounding in
 its cell bounds could decide between two distances a few ulps apart, so a search whose answer
 depends on the order of two distances within a relative ``TOL`` of each other (or of a bound)
-is flagged *ambiguous*: the caller asks the kd-tree for those points only (on a quantised
-100k-point LiDAR scan, under 1 % of them).
+is flagged *ambiguous*: the caller asks the kd-tree for those points only (on quantised LiDAR
+scans, ~1 % of them).
 """
 
 import numpy as np

@@ -31,8 +31,10 @@ order of equal distances. The candidates change every round but the input points
 one grid of cells (:mod:`.cell_grid`, side ≥ the first Hausdorff distance, which bounds every
 radius asked) is built once and each round only sorts the candidates into it; the cells give
 the kd-tree's answers bit for bit, and the few points whose answer hangs on the order of
-(nearly) equal distances are asked of the kd-tree, built only in rounds that need it. Tests
-compare the whole pass with the kd-tree version (``tests/naive.py``).
+(nearly) equal distances are asked of the kd-tree, built only in rounds that need it (an added
+point's ball likewise, if a point at its edge could go either way). Where a few wide gaps
+would make the cells hold hundreds of candidates (``MAX_LOAD``), the kd-tree answers every
+search. Tests compare the whole pass with the kd-tree version (``tests/naive.py``).
 """
 
 import numpy as np
