@@ -2,7 +2,7 @@
 
 import numpy as np
 from scipy.optimize import linprog
-from scipy.spatial import Delaunay, Voronoi
+from scipy.spatial import Delaunay, Voronoi, cKDTree
 
 from tiledsimplify.core import local_mesh as lm
 
@@ -203,3 +203,107 @@ def thin_below(X, cand, removable, tie, level, n_remove):
         alive[best[1]] = False
         removed.append(best[1])
     return np.array(removed, dtype=np.int64)
+
+
+def thin_lists(nbr, nd, removable, tie, level, n_remove):
+    """Gap thinning on given candidate lists (``nbr``/``nd`` as
+    :func:`tiledsimplify.core.refine.thin_below` takes them, id ``m`` = none) by recomputing
+    every owner and every gap from scratch at each step. Returns ``(removed, dist)``."""
+    m = len(removable)
+    alive = np.ones(m + 1, dtype=bool)
+    alive[m] = False
+    removed = []
+
+    def first(x, start):
+        live = [j for j in range(start, nbr.shape[1]) if alive[nbr[x, j]]]
+        return live[0] if live else -1
+
+    def owners():  # position of each row's owner; a row whose list starts with "none" keeps 0
+        return [0 if nbr[x, 0] == m else first(x, 0) for x in range(len(nbr))]
+
+    while len(removed) < n_remove:
+        own = owners()
+        best = None
+        for c in np.flatnonzero(alive[:m] & removable):
+            gaps = [0.0]
+            for x in range(len(nbr)):
+                if own[x] >= 0 and nbr[x, own[x]] == c:
+                    j = first(x, own[x] + 1)
+                    gaps.append(nd[x, j] if j >= 0 else np.inf)
+            if best is None or (max(gaps), tie[c], c) < best:
+                best = (max(gaps), tie[c], c)
+        if best is None or not best[0] <= level:
+            break
+        alive[best[2]] = False
+        removed.append(best[2])
+    own = owners()
+    dist = np.array([nd[x, j] if j >= 0 else np.inf for x, j in enumerate(own)])
+    return np.array(removed, dtype=np.int64), dist
+
+
+def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=0.05,
+                    min_step=0.002, max_rounds=60, k=16):
+    """:func:`tiledsimplify.core.refine.refine_coverage` with every search a scipy kd-tree
+    query, as it was first written: a fill by ball queries, and per round a kd-tree over the
+    candidates, a nearest query of every input point and a ``k``-nearest query of the rows."""
+    from tiledsimplify.core.refine import lists_from_dense, thin_below
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    keep = np.asarray(keep, dtype=bool).copy()
+    fixed = np.asarray(fixed, dtype=bool) & keep
+    n = X.shape[0]
+    addable = np.ones(n, dtype=bool) if addable is None else np.asarray(addable, dtype=bool)
+    ignored = ~(keep | addable)
+    watched = np.zeros(n, dtype=bool)
+    if watch is not None:
+        watched = np.asarray(watch, dtype=bool) & ignored
+        ignored &= ~watched
+    if tie is None:
+        tie = np.arange(n, dtype=np.uint64)
+    info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
+    if not (keep & ~fixed).any() or not (addable & ~keep).any():
+        return keep, info
+    tree_x = cKDTree(X)
+    dist, _ = cKDTree(X[keep]).query(X)
+    dist[ignored] = 0.0
+    H = float(dist[~watched].max())
+    info["hausdorff_before"] = H
+    while info["rounds"] < max_rounds and step >= min_step and H > 0:
+        info["rounds"] += 1
+        level = (1.0 - step) * H
+        trial = dist.copy()
+        trial[watched] = 0.0
+        added = []
+        while True:  # fill, farthest first
+            x = int(np.argmax(trial))
+            r = trial[x]
+            if not r > level:
+                break
+            added.append(x)
+            near = np.asarray(tree_x.query_ball_point(X[x], r), dtype=np.int64)
+            np.minimum.at(trial, near, np.linalg.norm(X[near] - X[x], axis=1))
+            trial[x] = 0.0
+        added = np.asarray(added, dtype=np.int64)
+        cand = np.concatenate([np.flatnonzero(keep), added])
+        removable = ~fixed[cand]
+        removable[cand.size - added.size:] = False
+        tree_c = cKDTree(X[cand])
+        d1, o1 = tree_c.query(X)
+        d1[ignored] = 0.0
+        removable[o1[watched & (d1 > level)]] = False
+        rows = np.flatnonzero(removable[o1] & ~ignored)
+        kq = min(k, cand.size)
+        nd, nbr = tree_c.query(X[rows], k=kq, distance_upper_bound=level)
+        gone, d_rows = thin_below(*lists_from_dense(nd, nbr, cand.size), removable,
+                                  np.ascontiguousarray(tie[cand], dtype=np.uint64), level,
+                                  added.size)
+        if gone.size < added.size:
+            step *= 0.5
+            continue
+        keep[added] = True
+        keep[cand[gone]] = False
+        info["swaps"] += int(added.size)
+        d1[rows] = d_rows
+        dist = d1
+        H = float(dist[~watched].max())
+    info["hausdorff_after"] = H
+    return keep, info

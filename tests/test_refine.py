@@ -6,7 +6,7 @@ from scipy.spatial import cKDTree
 
 from tiledsimplify import SimplifyOptions, simplify_points
 from tiledsimplify.core.heap import coordinate_hash
-from tiledsimplify.core.refine import owners_csr, refine_coverage, thin_below
+from tiledsimplify.core.refine import lists_from_dense, refine_coverage, thin_below
 
 import naive
 
@@ -34,11 +34,10 @@ def test_thin_below_matches_naive(seed):
     removable = rng.random(50) < 0.7
     tie = coordinate_hash(X[cand])
     nd, nbr = cKDTree(X[cand]).query(X, k=cand.size)  # full lists: no search cut-off
-    rev_start, rev = owners_csr(np.ascontiguousarray(nbr, dtype=np.int64), cand.size + 1)
     d1 = nd[:, 0]
     for level in (np.quantile(d1, 0.9) * 1.5, np.max(d1) * 3):
-        gone, dist = thin_below(np.ascontiguousarray(nbr, dtype=np.int64), nd, rev_start, rev,
-                                removable, tie, level, 30)
+        gone, dist = thin_below(*lists_from_dense(nd, nbr, cand.size), removable, tie, level,
+                                30)
         expect = naive.thin_below(X, cand, removable, tie, level, 30)
         assert gone.tolist() == expect.tolist()
         alive = np.ones(cand.size, bool)
@@ -47,10 +46,24 @@ def test_thin_below_matches_naive(seed):
         assert dist.max() <= max(level, d1.max())
 
 
-def test_owners_csr_lists_every_row_once_per_mention():
-    nbr = np.array([[0, 2], [2, 1], [1, 3]], dtype=np.int64)
-    start, rev = owners_csr(nbr, 4)
-    assert [rev[start[c]:start[c + 1]].tolist() for c in range(4)] == [[0], [1, 2], [0, 1], [2]]
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_thin_below_on_short_lists_matches_recomputing_every_step(seed):
+    # lists cut at k and at a search radius (some empty), as refine_coverage builds them: the
+    # owner lists and gaps maintained under removal equal those recomputed after each removal
+    rng = np.random.default_rng(seed)
+    X = _wavy(200, seed)
+    cand = np.sort(rng.choice(200, 60, replace=False))
+    removable = rng.random(60) < 0.8
+    tie = rng.integers(0, 4, 60).astype(np.uint64)  # many equal ties: the id decides
+    d1 = cKDTree(X[cand]).query(X)[0]
+    for k, radius in ((3, np.inf), (5, 1.5 * d1.max()), (8, 1.1 * d1.max()), (4, 0.8 * d1.max())):
+        nd, nbr = cKDTree(X[cand]).query(X, k=k, distance_upper_bound=radius)
+        nbr = np.ascontiguousarray(nbr, dtype=np.int64)
+        for level in (np.quantile(d1, 0.9), 2 * d1.max()):
+            gone, dist = thin_below(*lists_from_dense(nd, nbr, 60), removable, tie, level, 40)
+            expect, expect_dist = naive.thin_lists(nbr, nd, removable, tie, level, 40)
+            assert gone.tolist() == expect.tolist()
+            np.testing.assert_array_equal(dist, expect_dist)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
