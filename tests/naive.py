@@ -246,19 +246,8 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
     """:func:`tiledsimplify.core.refine.refine_coverage` with every search a scipy kd-tree
     query, as it was first written: a fill by ball queries, and per round a kd-tree over the
     candidates, a nearest query of every input point and a ``k``-nearest query of the rows."""
-    from tiledsimplify.core.refine import lists_from_dense, thin_below
-    X = np.ascontiguousarray(X, dtype=np.float64)
-    keep = np.asarray(keep, dtype=bool).copy()
-    fixed = np.asarray(fixed, dtype=bool) & keep
-    n = X.shape[0]
-    addable = np.ones(n, dtype=bool) if addable is None else np.asarray(addable, dtype=bool)
-    ignored = ~(keep | addable)
-    watched = np.zeros(n, dtype=bool)
-    if watch is not None:
-        watched = np.asarray(watch, dtype=bool) & ignored
-        ignored &= ~watched
-    if tie is None:
-        tie = np.arange(n, dtype=np.uint64)
+    from tiledsimplify.core.refine import inputs, lists_from_dense, thin_below
+    X, keep, fixed, addable, ignored, watched, tie = inputs(X, keep, fixed, addable, watch, tie)
     info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
     if not (keep & ~fixed).any() or not (addable & ~keep).any():
         return keep, info

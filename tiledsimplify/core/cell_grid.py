@@ -247,15 +247,10 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound):
             if sq.size < buf_id.size:
                 sq = np.empty(buf_id.size)
                 near_ones = np.empty(buf_id.size, dtype=np.int64)
-        qx = Q[t, 0]
-        qy = Q[t, 1]
-        qz = Q[t, 2]
+        q = Q[t]
         m = 0
         for i in range(cnt):  # branch-free: every distance, and which are within keep2
-            e0 = buf_xyz[i, 0] - qx
-            e1 = buf_xyz[i, 1] - qy
-            e2 = buf_xyz[i, 2] - qz
-            s = e0 * e0 + e1 * e1 + e2 * e2  # as cKDTree rounds it
+            s = sq_dist(buf_xyz, i, q)
             sq[i] = s
             near_ones[m] = i
             m += s < keep2

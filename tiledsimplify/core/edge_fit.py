@@ -18,10 +18,10 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    the k-means in a wrong split; when the fit fails, it is tried once more from a **line
    sweep**: the split of the neighbours by a straight line in their mean plane (``NDIR``
    directions, every offset) with the least total squared distance to the two planes, which
-   is where a sharp edge projects. If the planes meet at
-   more than ``MIN_ANGLE`` and each has at least ``MIN_SIDE`` points, the edge is their line of
-   intersection and the candidate is flagged only when it lies within ``width`` local spacings
-   of that line (local spacing: the median nearest-neighbour distance over the two-ring).
+   is where a sharp edge projects. If the planes meet at more than ``MIN_ANGLE`` and each has
+   at least ``MIN_SIDE`` points, the edge is their line of intersection and the candidate is
+   flagged only when it lies within ``width`` local spacings of that line (local spacing: the
+   median nearest-neighbour distance over the two-ring).
 
 So flags are the points "on or within about one spacing of a sharp edge" — the ground truth of
 DESIGN.md §4 — whatever the noise and the scan-line anisotropy.
@@ -31,8 +31,8 @@ import numpy as np
 
 from ._jit import jit
 from .boundary import deviation_at
-from .linalg import (NO_MOMENTS, add_moments, covariance_about, orient_canonical,
-                     smallest_axis, sym3_eigvals, tangent_basis)
+from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covariance,
+                     orient_canonical, smallest_axis, sym3_eigvals, tangent_basis)
 
 #: default candidate threshold on the smoothed deviation (radians, ~4.6°)
 CANDIDATE = 0.08
@@ -55,13 +55,15 @@ ROUNDS = 4
 FIT_RINGS = 2
 #: most points gathered in a neighbourhood
 MAX_RING = 128
-#: line directions the sweep split tries (measured on the 24 CAD cases: 3, 4, 6, 8 and 12 give
-#: the same F1 within 0.002, as the k-means rounds after it correct the direction)
+#: line directions the sweep split tries (3, 4, 6, 8 and 12 measured, before ``SWEEP_SIDE`` and
+#: ``MIN_SPREAD`` existed: median F1 over the 12 even and 12 noise-0.1 scan CAD cases the same
+#: within 0.002, as the k-means rounds after the sweep correct the direction)
 NDIR = 4
 #: each side of a sweep split holds at least this fraction of the neighbours (and ``MIN_SIDE``):
 #: three points always fit a plane exactly, so unbounded, the least-squares sweep would cut
-#: tiny exact sides off a noisy plane. A point within a spacing of an edge has about a quarter
-#: of its two-ring or more on the far side.
+#: tiny exact sides off a noisy plane. (Geometry, not measured: a disc cut at 0.4 of its radius
+#: from the centre leaves a quarter on the far side, about where a point one spacing from an
+#: edge has its two-ring.)
 SWEEP_SIDE = 0.2
 
 
@@ -199,21 +201,20 @@ def _smallest_scatter(m, k):
 @jit
 def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work):
     """Initial split by a straight line in the neighbours' mean plane (where a sharp edge
-    projects): of ``NDIR`` directions and every offset, the
-    one whose two halves lie closest to two planes (least total squared plane distance, from
-    running moments in sorted order), each half holding ``SWEEP_SIDE`` of the points or more.
+    projects): of ``NDIR`` directions and every offset, the one whose two halves lie closest
+    to two planes (least total squared plane distance, from running moments in sorted order),
+    each half holding ``SWEEP_SIDE`` of the points or more. ``idx[0]`` is the point itself.
     Returns False if ``c`` is too small for two such halves."""
     least = max(MIN_SIDE, int(np.ceil(SWEEP_SIDE * c)))
     if c < 2 * least:
         return False
     p = idx[0]
     px, py, pz = X[p, 0], X[p, 1], X[p, 2]
-    c00, c01, c02, c11, c12, c22 = covariance_about(X, p, idx[1:], c - 1)
-    smallest_axis(c00, c01, c02, c11, c12, c22, normal, work)
-    tangent_basis(normal, t1, t2)
-    total = NO_MOMENTS
-    for j in range(c):
+    total = NO_MOMENTS  # of idx[1:c] about p (p itself adds nothing)
+    for j in range(1, c):
         total = add_moments(total, X, idx[j], px, py, pz)
+    smallest_axis(*moments_covariance(total, c - 1), normal, work)  # the mean plane
+    tangent_basis(normal, t1, t2)
     best = np.inf
     best_d = 0
     best_k = least
@@ -275,9 +276,10 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing):
     Returns ``inf`` when the points are not two planes meeting at a sharp edge: a side with
     fewer than ``MIN_SIDE`` points or spread less than ``MIN_SPREAD`` spacings across (a row,
     not a face), planes within ``MIN_ANGLE`` of parallel, or a side whose RMS distance to its
-    plane exceeds ``MAX_RMS`` spacings (a curved or rough patch, not two faces), or sides that do not lie each on its own side of the line (more than
-    ``MAX_MIXED`` of a side's points farther than half a spacing from the line on the wrong
-    side: a noisy surface split in two interleaved halves, not two faces meeting).
+    plane exceeds ``MAX_RMS`` spacings (a curved or rough patch, not two faces), or sides that
+    do not lie each on its own side of the line (more than ``MAX_MIXED`` of a side's points
+    farther than half a spacing from the line on the wrong side: a noisy surface split in two
+    interleaved halves, not two faces meeting).
     """
     max_rms = MAX_RMS * spacing
     p = idx[0]

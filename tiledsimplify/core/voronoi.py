@@ -15,9 +15,9 @@ Construction
     points, 2 s with the shift). The shift can only change edges whose facet is thinner than
     ~1e-10 of the diagonal, and those count as degenerate anyway (``TOL_FACTOR`` = 1e-8).
     Clouds of affine rank 2 (a flat plate) use the 2-D Delaunay of the plane, rank 1 the chain
-    along the line, and tiny
-    or Qhull-rejected clouds all pairs or a joggled (``QJ``) triangulation as candidates; the
-    positive-area filter then decides on the exact coordinates in every case.
+    along the line, and tiny or Qhull-rejected clouds all pairs or a joggled (``QJ``)
+    triangulation as candidates; the positive-area filter then decides on the exact
+    coordinates in every case.
 
 Maintenance (paper §3.3)
     When ``p`` is removed, the cells of its Voronoi neighbours grow into the space ``p`` owned.
