@@ -11,8 +11,13 @@ from .removal import GUARDS
 
 #: the modes, default first
 MODES = ("coverage", "paper")
-#: default strength of the coverage term (see :mod:`.importance`)
-COVERAGE = 1.0
+#: default strength of the coverage term (see :mod:`.importance`). Measured on the 37 quality
+#: cases (Bunny, 12 CAD parts even and as scans at noise 0.1 and 0.2; ratio 0.1 / 0.2) against
+#: 1: strength 3 lowers the mean surface error on 31 of 37 (geometric mean -0.8 %), edge
+#: coverage up on 21 of 36 (+0.9 %), Hausdorff -0.4 %; 10, 30 and 100 about the same as 3
+#: (mean -1.1 to -1.3 %, but lower on fewer cases: 27-30 of 37) — past ~3 Eq. (1) only
+#: orders points of about equal spacing, while the edges it cannot see are kept as flags
+COVERAGE = 3.0
 #: mode "coverage": default reach of the Voronoi neighbourhoods, in spacings
 REACH = 20.0
 
