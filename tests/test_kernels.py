@@ -92,7 +92,9 @@ def test_heap_pops_in_key_order_with_updates():
         heap.update(h, pos, key, tie, i, float(rng.integers(0, 50)), size)
     got = []
     while size:
+        top = heap.top(h)
         got.append(heap.pop(h, pos, key, tie, size))
+        assert got[-1] == top
         size -= 1
     expected = sorted(range(n), key=lambda i: (key[i], tie[i], i))
     assert got == expected

@@ -104,10 +104,11 @@ def _remove_sequence(X, victims, reach=np.inf):
     bufs = np.empty((4, size + 5))
     lbufs = np.empty((2, size + 5), np.int64)
     frame = np.empty((3, 3))
+    mark = np.full(len(X), -1, np.int64)
     for p in victims:
         k, pool = voronoi.remove_point(X, p, start, cnt, cap, pool, meta,
                                        voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D,
-                                       reach, link, cand, bufs, lbufs, frame)
+                                       reach, link, cand, bufs, lbufs, frame, mark)
     alive = np.ones(len(X), bool)
     alive[victims] = False
     maintained = adjacency.to_sets(start, cnt, pool, alive)

@@ -38,27 +38,29 @@ def clip(n, xs, ys, labels, gx, gy, h, label, ox, oy, olabels):
     Returns
     -------
     int
-        ``-1`` if the polygon is inside the half-plane (nothing written: keep the input),
-        otherwise the number of vertices written to ``(ox, oy, olabels)`` (0 = empty).
+        ``-1`` if the polygon is inside the half-plane (keep the input; the output buffers
+        may have been written), otherwise the number of vertices written to
+        ``(ox, oy, olabels)`` (0 = empty).
+
+    Notes
+    -----
+    One pass: each vertex's signed distance is computed once and the output is written as if
+    the polygon were cut; whether it was is known only at the end (about a third of the
+    calls in the removal loop keep the polygon whole).
     """
+    x0, y0 = xs[0], ys[0]
+    d0 = gx * x0 + gy * y0 - h
+    xi, yi, di = x0, y0, d0
     inside = True
-    outside = True
-    for i in range(n):
-        d = gx * xs[i] + gy * ys[i] - h
-        if d > 0.0:
-            inside = False
-        else:
-            outside = False
-    if inside:
-        return -1
-    if outside:
-        return 0
     m = 0
     for i in range(n):
-        j = i + 1 if i + 1 < n else 0
-        xi, yi, xj, yj = xs[i], ys[i], xs[j], ys[j]
-        di = gx * xi + gy * yi - h
-        dj = gx * xj + gy * yj - h
+        if i + 1 < n:
+            xj, yj = xs[i + 1], ys[i + 1]
+            dj = gx * xj + gy * yj - h
+        else:
+            xj, yj, dj = x0, y0, d0
+        if di > 0.0:
+            inside = False
         if di <= 0.0:
             ox[m], oy[m], olabels[m] = xi, yi, labels[i]
             m += 1
@@ -70,6 +72,9 @@ def clip(n, xs, ys, labels, gx, gy, h, label, ox, oy, olabels):
             t = di / (di - dj)
             ox[m], oy[m], olabels[m] = xi + t * (xj - xi), yi + t * (yj - yi), labels[i]
             m += 1
+        xi, yi, di = xj, yj, dj
+    if inside:
+        return -1
     return m
 
 

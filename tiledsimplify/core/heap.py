@@ -9,92 +9,103 @@ id (ids sorted by coordinate) sweeps each face empty from one side.
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 
 
-@jit
-def _less(key, tie, a, b):
-    ka = key[a]
-    kb = key[b]
+@jit_inline
+def _less(ka, ta, a, kb, tb, b):
     if ka != kb:
         return ka < kb
-    if tie[a] != tie[b]:
-        return tie[a] < tie[b]
+    if ta != tb:
+        return ta < tb
     return a < b
 
 
 @jit
-def _sift_up(heap, pos, key, tie, k):
-    item = heap[k]
+def _sift_up(heap, pos, hkey, htie, k):
+    item, ki, ti = heap[k], hkey[k], htie[k]
     while k > 0:
         parent = (k - 1) >> 1
         other = heap[parent]
-        if _less(key, tie, item, other):
-            heap[k] = other
+        if _less(ki, ti, item, hkey[parent], htie[parent], other):
+            heap[k], hkey[k], htie[k] = other, hkey[parent], htie[parent]
             pos[other] = k
             k = parent
         else:
             break
-    heap[k] = item
+    heap[k], hkey[k], htie[k] = item, ki, ti
     pos[item] = k
 
 
 @jit
-def _sift_down(heap, pos, key, tie, k, size):
-    item = heap[k]
+def _sift_down(heap, pos, hkey, htie, k, size):
+    item, ki, ti = heap[k], hkey[k], htie[k]
     while True:
         child = 2 * k + 1
         if child >= size:
             break
         right = child + 1
-        if right < size and _less(key, tie, heap[right], heap[child]):
+        if right < size and _less(hkey[right], htie[right], heap[right],
+                                  hkey[child], htie[child], heap[child]):
             child = right
         other = heap[child]
-        if _less(key, tie, other, item):
-            heap[k] = other
+        if _less(hkey[child], htie[child], other, ki, ti, item):
+            heap[k], hkey[k], htie[k] = other, hkey[child], htie[child]
             pos[other] = k
             k = child
         else:
             break
-    heap[k] = item
+    heap[k], hkey[k], htie[k] = item, ki, ti
     pos[item] = k
 
 
 @jit
 def build(heap, pos, key, tie, items):
     """Heapify ``items`` (point ids) with priorities ``key[items]``; returns the heap size."""
+    hp, hkey, htie = heap
     size = items.size
     for k in range(size):
-        heap[k] = items[k]
+        hp[k] = items[k]
+        hkey[k] = key[items[k]]
+        htie[k] = tie[items[k]]
         pos[items[k]] = k
     for k in range(size // 2 - 1, -1, -1):
-        _sift_down(heap, pos, key, tie, k, size)
+        _sift_down(hp, pos, hkey, htie, k, size)
     return size
 
 
 @jit
 def update(heap, pos, key, tie, i, value, size):
     """Set ``key[i] = value`` and restore the heap order (``i`` must be in the heap)."""
+    hp, hkey, htie = heap
     old = key[i]
     key[i] = value
     k = pos[i]
+    hkey[k] = value
     if value < old:
-        _sift_up(heap, pos, key, tie, k)
+        _sift_up(hp, pos, hkey, htie, k)
     elif value > old:
-        _sift_down(heap, pos, key, tie, k, size)
+        _sift_down(hp, pos, hkey, htie, k, size)
 
 
 @jit
 def pop(heap, pos, key, tie, size):
     """Remove and return the id with the smallest key; the new size is ``size - 1``."""
-    top = heap[0]
+    hp, hkey, htie = heap
+    top = hp[0]
     pos[top] = -1
     size -= 1
     if size > 0:
-        heap[0] = heap[size]
-        pos[heap[0]] = 0
-        _sift_down(heap, pos, key, tie, 0, size)
+        hp[0], hkey[0], htie[0] = hp[size], hkey[size], htie[size]
+        pos[hp[0]] = 0
+        _sift_down(hp, pos, hkey, htie, 0, size)
     return top
+
+
+@jit
+def top(heap):
+    """The id with the smallest key (the heap must not be empty)."""
+    return heap[0][0]
 
 
 def coordinate_hash(X):
@@ -116,5 +127,11 @@ def coordinate_hash(X):
 
 @jit
 def new(n):
-    """Empty storage for a heap over ``n`` ids: ``(heap, pos)``."""
-    return np.empty(n, dtype=np.int64), np.full(n, -1, dtype=np.int64)
+    """Empty storage for a heap over ``n`` ids: ``(heap, pos)``.
+
+    ``heap`` holds the ids in heap order with copies of their keys and ties beside them
+    (``(ids, keys, ties)``), so a sift compares neighbouring entries instead of looking each
+    id's key up in the per-point arrays; ``pos`` is each id's slot (``-1``: not in the heap).
+    """
+    return ((np.empty(n, dtype=np.int64), np.empty(n, dtype=np.float64),
+             np.empty(n, dtype=np.uint64)), np.full(n, -1, dtype=np.int64))

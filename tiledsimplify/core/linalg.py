@@ -138,14 +138,21 @@ def smallest_axis(c00, c01, c02, c11, c12, c22, out, work):
     to the principal axis, or (0, 0, 1) if there is no principal axis either.
     """
     l0, l1, l2 = sym3_eigvals(c00, c01, c02, c11, c12, c22)
+    smallest_axis_given(c00, c01, c02, c11, c12, c22, l0, l2, out, work)
+    return l0, l1, l2
+
+
+@jit_inline
+def smallest_axis_given(c00, c01, c02, c11, c12, c22, l0, l2, out, work):
+    """:func:`smallest_axis` when the smallest and largest eigenvalues ``l0``, ``l2`` (from
+    :func:`sym3_eigvals` on the same matrix) are already known."""
     if sym3_eigvec(c00, c01, c02, c11, c12, c22, l0, out):
-        return l0, l1, l2
+        return
     # l0 == l1: the null space of A - l0 I is a plane; the principal axis is defined by l2
     if sym3_eigvec(c00, c01, c02, c11, c12, c22, l2, work):
         any_perpendicular(work[0], work[1], work[2], out)
     else:
         out[0], out[1], out[2] = 0.0, 0.0, 1.0
-    return l0, l1, l2
 
 
 @jit

@@ -33,7 +33,7 @@ import numpy as np
 from ._jit import jit, jit_inline
 from .clip import clip, square
 from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covariance,
-                     smallest_axis, sym3_eigvals, tangent_basis)
+                     smallest_axis, smallest_axis_given, sym3_eigvals, tangent_basis)
 
 #: neighbours used for the reference plane, at least
 MIN_PLANE = 6
@@ -57,10 +57,15 @@ _SIN_ELEV = math.sin(math.radians(MAX_ELEVATION))
 def _sort_by_distance(X, p, nbr, m, idx, d2):
     """Fill ``idx[:m], d2[:m]`` with the neighbours and squared distances, sorted (insertion)."""
     px, py, pz = X[p, 0], X[p, 1], X[p, 2]
+    # all distances first (independent loads), then the sort on the two small buffers
     for k in range(m):
         q = nbr[k]
         dx, dy, dz = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
-        dd = dx * dx + dy * dy + dz * dz
+        d2[k] = dx * dx + dy * dy + dz * dz
+        idx[k] = q
+    for k in range(1, m):
+        dd = d2[k]
+        q = idx[k]
         j = k
         while j > 0 and (d2[j - 1] > dd or (d2[j - 1] == dd and idx[j - 1] > q)):
             d2[j] = d2[j - 1]
@@ -79,6 +84,10 @@ def _plane_size(X, p, idx, d2, m):
     of a scan sees mostly points along the border), the ``k`` of largest spread. Only neighbours
     within ``FIT`` times the third-nearest distance take part: a border point's Voronoi
     neighbours include far points whose spread would "win" with a plane across open air.
+
+    Returns ``(k, moments, l0, l2, known)``: if ``known``, the running moments of ``p`` and the
+    ``k`` nearest (summed as :func:`.linalg.covariance_about` sums them) and the smallest and
+    largest eigenvalue of their covariance, which the plane fit reuses.
     """
     if m >= 3:
         limit = FIT * FIT * d2[2]
@@ -93,26 +102,32 @@ def _plane_size(X, p, idx, d2, m):
     mom = NO_MOMENTS
     for k in range(1, m + 1):
         mom = add_moments(mom, X, idx[k - 1], px, py, pz)
-        if k >= MIN_PLANE and _spread(mom, k) >= SPREAD:
-            return k
+        if k >= MIN_PLANE:
+            l0, l1, l2 = sym3_eigvals(*moments_covariance(mom, k))
+            if _ratio(l1, l2) >= SPREAD:
+                return k, mom, l0, l2, True
     mom = NO_MOMENTS
     best = -1.0
     kbest = m
+    mbest = NO_MOMENTS
+    l0best, l2best, known = 0.0, 0.0, False
     for k in range(1, m + 1):
         mom = add_moments(mom, X, idx[k - 1], px, py, pz)
         if k < 2:
             continue
-        spread = _spread(mom, k)
+        l0, l1, l2 = sym3_eigvals(*moments_covariance(mom, k))
+        spread = _ratio(l1, l2)
         if spread > best:
             best = spread
             kbest = k
-    return kbest
+            mbest = mom
+            l0best, l2best, known = l0, l2, True
+    return kbest, mbest, l0best, l2best, known
 
 
 @jit_inline
-def _spread(mom, k):
-    """Middle / largest eigenvalue of the covariance of ``p`` and ``k`` points (moments)."""
-    l0, l1, l2 = sym3_eigvals(*moments_covariance(mom, k))
+def _ratio(l1, l2):
+    """The spread: middle / largest eigenvalue (0 if the largest is not positive)."""
     return l1 / l2 if l2 > 0.0 else 0.0
 
 
@@ -136,11 +151,15 @@ def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame):
             break
     px, py, pz = X[p, 0], X[p, 1], X[p, 2]
     # 2. reference plane from the nearest, non-collinear neighbours (p included)
-    k = _plane_size(X, p, idx, d2, m)
-    c00, c01, c02, c11, c12, c22 = covariance_about(X, p, idx, k)
+    k, mom, l0, l2, known = _plane_size(X, p, idx, d2, m)
     t1 = frame[0]
     t2 = frame[1]
-    smallest_axis(c00, c01, c02, c11, c12, c22, normal0, t1)
+    if known:  # the same sums and eigenvalues as computed afresh
+        c00, c01, c02, c11, c12, c22 = moments_covariance(mom, k)
+        smallest_axis_given(c00, c01, c02, c11, c12, c22, l0, l2, normal0, t1)
+    else:
+        c00, c01, c02, c11, c12, c22 = covariance_about(X, p, idx, k)
+        smallest_axis(c00, c01, c02, c11, c12, c22, normal0, t1)
     tangent_basis(normal0, t1, t2)
     radius = math.sqrt(d2[k - 1])
     half = BOX * radius

@@ -125,7 +125,7 @@ def thin_below(start, nbr, nd, removable, tie, level, n_remove):
     out = np.empty(min(n_remove, items.size), dtype=np.int64)
     done = 0
     while done < out.size and size > 0:
-        c = hp[0]
+        c = heap.top(hp)
         g = _gap(c, start, nbr, nd, owner, alive, head, nxt)
         if g > key[c]:  # stale: the gap grew since it was queued
             heap.update(hp, pos, key, tie, c, g, size)

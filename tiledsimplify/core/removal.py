@@ -95,6 +95,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     order = np.empty(n_steps, dtype=np.int64)
     at = np.empty(n_steps)
     stamp = np.zeros(n, dtype=np.int64)
+    mark = np.full(n, -1, dtype=np.int64)
     mesh_changed = np.zeros(n, dtype=np.bool_)
     normal_changed = np.zeros(n, dtype=np.bool_)
     buf = 64
@@ -127,7 +128,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
             bufs = np.empty((4, 2 * need + 5))
             lbufs = np.empty((2, 2 * need + 5), dtype=np.int64)
         k, pool = remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand,
-                               bufs, lbufs, frame)
+                               bufs, lbufs, frame, mark)
         # -- 2. local meshes and normals of the first ring
         m = _max_count(cnt, link, k)
         if m + 5 > fbufs.shape[1] or m > work.size:

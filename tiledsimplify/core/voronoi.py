@@ -368,7 +368,7 @@ def voronoi_neighbours(X, slack=8, scale=None, reach=math.inf):
 
 @jit
 def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand, bufs, lbufs,
-                 frame):
+                 frame, mark):
     """Remove ``p`` from the Voronoi-neighbour lists and add the facets its removal opens.
 
     Paper §3.3: "by updating the Voronoi diagram of P" — done exactly and locally. After the
@@ -376,7 +376,8 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
     have moved, so the (possibly new) pool is returned too: ``(k, pool)``.
 
     ``cand`` must have room for ``max degree + cnt[p]`` entries; ``bufs`` (4, m) and
-    ``lbufs`` (2, m) are clipping scratch with ``m >= len(cand) + 5``.
+    ``lbufs`` (2, m) are clipping scratch with ``m >= len(cand) + 5``. ``mark`` (int64, one
+    entry per point, all ``-1``) is scratch too; it is left all ``-1``.
     """
     s = start[p]
     k = cnt[p]
@@ -385,27 +386,36 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
     cnt[p] = 0
     for j in range(k):
         adjacency.remove(start, cnt, pool, link[j], p)
+    # constraints: the whole former link of p, then the current neighbours of a. Most pairs
+    # have no facet, and the points that block one are mostly in the link: first come, the
+    # clipped polygon empties after a few constraints.
+    for j in range(k):
+        cand[j] = link[j]
     for ia in range(k):
         a = link[ia]
+        # cand[k:k + na] is the list of a, kept in step as a gains neighbours below (append
+        # keeps the order); mark[q] == a flags its members, for the "already neighbours" test
+        sa = start[a]
+        na = cnt[a]
+        for j in range(na):
+            q = pool[sa + j]
+            cand[k + j] = q
+            mark[q] = a
         for ib in range(ia + 1, k):
             b = link[ib]
-            if adjacency.contains(start, cnt, pool, a, b):
+            if mark[b] == a:
                 continue
             if reach < math.inf:  # farther apart than twice the reach: no facet within it
                 dx, dy, dz = X[b, 0] - X[a, 0], X[b, 1] - X[a, 1], X[b, 2] - X[a, 2]
                 if dx * dx + dy * dy + dz * dz >= 4.0 * reach * reach:
                     continue
-            # constraints: the whole former link of p, then the current neighbours of a. Most
-            # pairs have no facet, and the points that block one are mostly in the link: first
-            # come, the clipped polygon empties after a few constraints.
-            sa = start[a]
-            na = cnt[a]
-            for j in range(k):
-                cand[j] = link[j]
-            for j in range(na):
-                cand[k + j] = pool[sa + j]
             if facet_positive(X, a, b, cand, na + k, half, tol, reach,
                               bufs[0], bufs[1], lbufs[0], bufs[2], bufs[3], lbufs[1], frame, p):
                 pool = adjacency.append(start, cnt, cap, pool, meta, a, b)
                 pool = adjacency.append(start, cnt, cap, pool, meta, b, a)
+                cand[k + na] = b
+                mark[b] = a
+                na += 1
+        for j in range(na):
+            mark[cand[k + j]] = -1
     return k, pool
