@@ -107,3 +107,33 @@ def test_cli_evaluate(cloud, tmp_path, capsys, data_dir):
     got = json.loads(capsys.readouterr().out)
     assert got["edge_coverage"] > 0.95 and got["hausdorff"] == 0.0
     assert main(["evaluate", str(pts), str(tmp_path / "nope.xyz")]) == EXIT_INPUT
+
+
+def test_bad_output_fails_before_the_work(cloud, tmp_path, caplog, monkeypatch):
+    """A missing output directory, a directory or an unknown suffix as the output is reported
+    before any point is read or simplified (a long run must not fail only at the end)."""
+    import importlib
+
+    import tiledsimplify.cli as cli
+    run_mod = importlib.import_module("tiledsimplify.pipeline.run")  # the module, not run()
+
+    X, path = cloud
+
+    def no_work(*a, **k):
+        raise AssertionError("the work started before the output was checked")
+
+    monkeypatch.setattr(cli, "read_points", no_work)
+    monkeypatch.setattr(run_mod.TileStore, "create", no_work)
+    missing = tmp_path / "no_such_dir" / "out.ply"
+    for command in ("simplify", "run"):
+        caplog.clear()
+        assert main([command, str(path), str(missing), "--ratio", "0.5"]) == EXIT_INPUT
+        assert "no_such_dir does not exist" in caplog.text
+        caplog.clear()
+        assert main([command, str(path), str(tmp_path), "--ratio", "0.5"]) == EXIT_INPUT
+        assert "is a directory" in caplog.text
+        caplog.clear()
+        assert main([command, str(path), str(tmp_path / "out.foo"), "--ratio", "0.5"]) \
+            == EXIT_INPUT
+        assert "cannot write '.foo'" in caplog.text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.xyz"]

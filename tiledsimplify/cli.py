@@ -18,7 +18,7 @@ from .core import SimplifyOptions, simplify_points
 from .core.options import MODES
 from .errors import BudgetWarning, TiledSimplifyError
 from .io import read_points
-from .io.points_out import write_points
+from .io.points_out import check_output, write_points
 
 log = logging.getLogger("tiledsimplify")
 
@@ -199,6 +199,7 @@ def _run(args):
 
 def _simplify(args):
     t0 = time.perf_counter()
+    check_output(args.output)
     xyz = read_points(args.input)
     log.info("read %d points from %s in %.2f s", len(xyz), args.input, time.perf_counter() - t0)
     options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,

@@ -10,9 +10,38 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FileFormatError
+from ..errors import FileFormatError, InputError
 
 SUFFIXES = (".npy", ".ply", ".xyz", ".txt", ".csv")
+
+
+def _check_suffix(path, known):
+    suffix = path.suffix.lower()
+    if suffix not in known:
+        raise FileFormatError(f"{path}: cannot write '{suffix}' files; use one of "
+                              f"{', '.join(known)}.")
+    return suffix
+
+
+def check_output(path, extra_suffixes=()):
+    """Fail now, not after the work, if ``path`` cannot be written.
+
+    Checks what the writers would only find at the end of a run: ``path`` is not a
+    directory, its suffix is one they write (:data:`SUFFIXES`, plus ``extra_suffixes``), and
+    its directory exists and is writable (the output is written beside it and renamed). Raises :class:`FileFormatError` or :class:`InputError`
+    naming the path and the fix.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory; give a file name for the output.")
+    _check_suffix(path, SUFFIXES + tuple(extra_suffixes))
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise InputError(f"{path}: the output directory {directory} does not exist; create it "
+                         "or write somewhere else.")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise InputError(f"{path}: the output directory {directory} is not writable; choose "
+                         "a directory you can write to.")
 
 
 def _table(xyz, columns):
@@ -76,10 +105,7 @@ def write_points(path, xyz, columns=None):
     columns : dict of name -> (n,) array, optional
     """
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise FileFormatError(f"{path}: cannot write '{suffix}' files; use one of "
-                              f"{', '.join(SUFFIXES)}.")
+    suffix = _check_suffix(path, SUFFIXES)
     table = _table(np.asarray(xyz, dtype=np.float64).reshape(-1, 3), columns or {})
     directory = path.parent if str(path.parent) else Path(".")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=directory)

@@ -27,7 +27,8 @@ from .. import __version__
 from ..core import SimplifyOptions, edge_fit
 from ..core.result import resolve_target
 from ..errors import InputError, TiledSimplifyError
-from ..io.points_out import write_points
+from ..io.las import LAS_SUFFIXES
+from ..io.points_out import check_output, write_points
 from ..io.sources import open_source
 from ..tiles import TileStore
 from .budget import deeper_tiles, global_cut, kept_in_tile, store_sequences
@@ -244,6 +245,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     if output.suffix.lower() in (".las", ".laz") and not source.is_las:
         raise InputError(f"{output}: LAS/LAZ output needs LAS/LAZ input (it keeps the input's "
                          "point records); write .ply, .npy, .xyz or .csv instead.")
+    check_output(output, LAS_SUFFIXES)
     opts = asdict(options)
     settings = {"tile_points": int(tile_points), "halo": halo, "options": opts,
                 "version": __version__}
