@@ -137,3 +137,16 @@ def test_bad_output_fails_before_the_work(cloud, tmp_path, caplog, monkeypatch):
             == EXIT_INPUT
         assert "cannot write '.foo'" in caplog.text
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.xyz"]
+
+
+def test_empty_input_is_an_error(tmp_path, caplog):
+    """A file with no points is reported (naming it), not simplified into an empty output."""
+    empty = tmp_path / "empty.ply"  # a valid PLY with no vertices
+    empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\n"
+                     "property float y\nproperty float z\nend_header\n")
+    for command in ("simplify", "run"):
+        caplog.clear()
+        out = tmp_path / f"out_{command}.ply"
+        assert main([command, str(empty), str(out), "--ratio", "0.5"]) == EXIT_INPUT
+        assert "empty.ply: the input has no points" in caplog.text
+        assert not out.exists()

@@ -202,6 +202,9 @@ def _simplify(args):
     check_output(args.output)
     xyz = read_points(args.input)
     log.info("read %d points from %s in %.2f s", len(xyz), args.input, time.perf_counter() - t0)
+    if len(xyz) == 0:
+        raise TiledSimplifyError(f"{args.input}: the input has no points; nothing to simplify. "
+                                 "Check that it is the file you meant.")
     options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
                               detect_boundary=not args.no_boundary)
     with warnings.catch_warnings(record=True) as caught:

@@ -238,6 +238,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     output = Path(output)
     source = open_source(input, chunk_points=chunk_points)
     n = source.count
+    if n == 0:
+        raise InputError(f"{input}: the input has no points; nothing to simplify. Check that it "
+                         "is the file (or glob) you meant.")
     target = resolve_target(n, ratio, count)
     if not 0.0 < float(floor) < 1.0:
         raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
