@@ -28,8 +28,8 @@ def check_output(path, extra_suffixes=()):
 
     Checks what the writers would only find at the end of a run: ``path`` is not a
     directory, its suffix is one they write (:data:`SUFFIXES`, plus ``extra_suffixes``), and
-    its directory exists and is writable (the output is written beside it and renamed). Raises :class:`FileFormatError` or :class:`InputError`
-    naming the path and the fix.
+    its directory exists and is writable (the output is written beside it and renamed).
+    Raises :class:`FileFormatError` or :class:`InputError` naming the path and the fix.
     """
     path = Path(path)
     if path.is_dir():
