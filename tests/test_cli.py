@@ -114,10 +114,10 @@ def test_bad_output_fails_before_the_work(cloud, tmp_path, caplog, monkeypatch):
     before any point is read or simplified (a long run must not fail only at the end)."""
     import importlib
 
-    import tiledsimplify.cli as cli
+    from tiledsimplify import cli
     run_mod = importlib.import_module("tiledsimplify.pipeline.run")  # the module, not run()
 
-    X, path = cloud
+    _, path = cloud
 
     def no_work(*a, **k):
         raise AssertionError("the work started before the output was checked")
