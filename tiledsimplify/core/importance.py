@@ -13,7 +13,10 @@ the paper's greedy empties flat faces; the ``ρ²`` term makes it thin them even
 spots go first, as in Poisson-disk sample elimination), and a point whose neighbours are
 already far apart is expensive to remove. ``w`` has units of 1/length: a sphere of curvature
 ``κ`` gives Eq. (1) ≈ κρ²/2, so ``w`` is about the curvature below which a region counts as
-flat; the core sets it from the point spacing (:func:`coverage_weight`). Both terms depend only
+flat; the core sets it from the point spacing (:func:`coverage_weight`). At the default
+strength (3: ``w`` = 1 / spacing) Eq. (1) outweighs the spacing term only where the radius of
+curvature is below about half a spacing — creases; smooth regions are thinned evenly, which
+measured lower mean surface error than strength 1 on 31 of the 37 quality cases. Both terms depend only
 on ``DN_p`` and the normals of ``DN_p``, so the exact two-ring updates of the removal loop stay
 exact. A point whose neighbours are all boundary points has no Eq. (1) term here (0) rather
 than ``+inf``; a point with no local-mesh neighbour at all (none within the Voronoi reach, see
