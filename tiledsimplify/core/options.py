@@ -61,12 +61,12 @@ class SimplifyOptions:
         Voronoi neighbours ``VN_p`` are the points whose Voronoi cell shares a facet with
         ``p``'s *within this many spacings of both* (the facet's part inside the two balls of
         radius ``reach · spacing``, as in an alpha complex). ``inf``: the paper's unbounded
-        rule. None: the mode's — 20 for ``"coverage"``, ``inf`` for ``"paper"``. Neighbours whose
-        shared facet comes within the reach are unchanged; it cuts the ones a point gets only
-        through the far reaches of its cell — across the inside of a part, and, on the outside of a flat face of a
-        quantised scan, hundreds to thousands (one 100k-point tile of a 10M scan: removal
-        ~165 s unbounded, ~3 s at 20) — and bridges no gap wider than twice the reach (a point
-        with no neighbour left is kept to the end).
+        rule. None: the mode's — 20 for ``"coverage"``, ``inf`` for ``"paper"``. Neighbours
+        whose shared facet comes within the reach are unchanged; it cuts the ones a point gets
+        only through the far reaches of its cell — across the inside of a part, and, on the
+        outside of a flat face of a quantised scan, hundreds to thousands (one 100k-point tile
+        of a 10M scan: removal ~165 s unbounded, ~3 s at 20) — and bridges no gap wider than
+        twice the reach (a point with no neighbour left is kept to the end).
     guard : {"none", "max_spacing"}
         A rule that can veto a removal (see :mod:`tiledsimplify.core.removal`). Vetoed
         points are kept; if that makes the target unreachable the result says so.

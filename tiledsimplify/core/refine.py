@@ -375,9 +375,9 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
     Per round, O(n): the candidates sorted into the cells, for every input point the
     candidates in the 27 cells around it (a few dozen), the ball of each added point the same
     way; a kd-tree over the candidates only for points whose answer hangs on equal distances
-    (~1 % on quantised scans); an indexed heap over the kept points. One core: ~0.05 s for
-    Fandisk (16k points at 20 %), ~0.5 s for 100k scan points, 3-4x less than the kd-tree
-    version's in the same session.
+    (~1 % on quantised scans); an indexed heap over the kept points. One core: ~0.04 s for
+    Fandisk (16k points at 20 %), ~0.3 s for 100k scan points, 3-5x less than the kd-tree
+    version's.
     """
     X, keep, fixed, addable, ignored, watched, tie = inputs(X, keep, fixed, addable, watch, tie)
     info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
