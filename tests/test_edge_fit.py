@@ -23,8 +23,9 @@ def _localise_all(X):
     nn = np.empty(len(X))
     edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
     out = np.empty(len(X))
-    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, np.ones(len(X), bool), out)
-    return out, nn
+    angle = np.empty(len(X))
+    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, np.ones(len(X), bool), out, angle)
+    return out, nn, angle
 
 
 def test_nearest_distances_equal_kdtree():
@@ -39,7 +40,7 @@ def test_nearest_distances_equal_kdtree():
 
 def test_fitted_edge_distance_is_the_true_distance_near_a_ridge():
     X = _roof(np.random.default_rng(0), 4000)
-    est, nn = _localise_all(X)
+    est, nn, _ = _localise_all(X)
     spacing = np.median(nn)
     # true distance to the ridge x = 0 within the face: |x| / cos(45°)
     true = np.abs(X[:, 0]) / np.cos(np.deg2rad(45.0)) / spacing
@@ -53,14 +54,47 @@ def test_fitted_edge_distance_is_the_true_distance_near_a_ridge():
     assert not (est[inner & (true > 3)] <= 1.5).any()
 
 
+@pytest.mark.parametrize("opening, turn", [(90.0, 90.0), (130.0, 50.0)])
+def test_fitted_angle_is_the_angle_between_the_faces(opening, turn):
+    X = _roof(np.random.default_rng(4), 4000, angle_deg=opening)
+    est, _, angle = _localise_all(X)
+    near = np.isfinite(est) & (est < 1.5) & (np.abs(X[:, 1]) < 0.8)
+    assert near.sum() > 50
+    assert abs(np.median(angle[near]) - turn) < 3.0
+    assert (angle[~np.isfinite(est)] == 0.0).all()
+
+
+def test_band_is_narrower_beside_a_soft_edge():
+    distance = np.array([0.2, 0.6, 0.8, 1.0, 1.2, np.inf, 0.6, 0.8])
+    angle = np.array([90.0, 90.0, 90.0, 90.0, 90.0, 0.0, 50.0, 50.0])
+    soft = edge_fit.SOFT_WIDTH
+    assert 0.6 < soft < 0.8  # the cases below straddle it
+    np.testing.assert_array_equal(
+        edge_fit.band(distance, angle, 1.0), [1, 1, 1, 1, 0, 0, 1, 0])
+    np.testing.assert_array_equal(
+        edge_fit.band(distance, angle, 2.0), [1, 1, 1, 1, 1, 0, 1, 1])
+    # a 50° crease keeps a thinner band than a 90° edge on the same roof sampling
+    rng = np.random.default_rng(5)
+    widths = []
+    for opening in (90.0, 130.0):
+        X = _roof(rng, 4000, angle_deg=opening)
+        est, nn, angle = _localise_all(X)
+        flags = edge_fit.band(est, angle, 1.0) & (np.abs(X[:, 1]) < 0.8)
+        # true distance within the face to the ridge x = 0, in spacings
+        slope = np.deg2rad(90.0 - opening / 2.0)
+        true = np.abs(X[flags, 0]) / np.cos(slope) / np.median(nn)
+        widths.append(np.percentile(true, 95))
+    assert widths[1] < 0.85 * widths[0]
+
+
 def test_no_edge_on_a_noisy_plane_or_a_shallow_fold():
     rng = np.random.default_rng(1)
     P = np.c_[rng.random((3000, 2)), np.zeros(3000)]
     P[:, 2] += 0.1 * 0.015 * rng.normal(size=3000)  # noise 0.1 x spacing
-    est, _ = _localise_all(P)
+    est, _, _ = _localise_all(P)
     assert np.isfinite(est).mean() < 0.01
     shallow = _roof(rng, 3000, angle_deg=170.0)  # a 10° crease is not a sharp edge
-    est, _ = _localise_all(shallow)
+    est, _, _ = _localise_all(shallow)
     assert not np.isfinite(est).any()
 
 

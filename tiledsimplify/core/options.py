@@ -48,7 +48,8 @@ class SimplifyOptions:
     boundary_floor : float
         ``"paper"`` automatic threshold: lower bound (radians).
     edge_width : float
-        ``"coverage"``: flag candidates within this many local spacings of the fitted edge.
+        ``"coverage"``: flag candidates within this many local spacings of the fitted edge
+        (0.7 of it beside edges whose faces meet at less than 60°; :func:`.edge_fit.band`).
     coverage : float
         Strength of the coverage term: the importance is Eq. (1) + ``coverage / (3 · spacing)
         · ρ²`` (ρ²: mean squared distance to the local-mesh neighbours). Larger: more even

@@ -161,7 +161,8 @@ def boundary_flags(Xu, st, options):
 
     ``"paper"``: the one-ring measure with the automatic threshold (§3.1). ``"coverage"``: the
     two-ring measure, candidates above the threshold, then only those within
-    ``options.edge_width`` local spacings of a fitted edge line (:mod:`.edge_fit`).
+    ``options.edge_width`` local spacings of a fitted edge line, less beside a soft edge
+    (:func:`.edge_fit.band`).
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
@@ -182,8 +183,10 @@ def boundary_flags(Xu, st, options):
     nn = np.empty(m)
     edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
     distance = np.empty(m)
-    edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, distance)
-    return deviation, distance <= options.edge_width, threshold
+    angle = np.empty(m)
+    edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, distance,
+                      angle)
+    return deviation, edge_fit.band(distance, angle, options.edge_width), threshold
 
 
 def _options(options):
