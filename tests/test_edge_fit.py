@@ -22,9 +22,10 @@ def _localise_all(X):
     st = neighbourhoods(X, scale_of(X))
     nn = np.empty(len(X))
     edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
-    out = np.empty(len(X))
-    angle = np.empty(len(X))
-    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, np.ones(len(X), bool), out, angle)
+    n = len(X)
+    out, angle, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
+    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, np.ones(n, bool), out, angle, line,
+                      local)
     return out, nn, angle
 
 
@@ -155,15 +156,61 @@ def test_sweep_seed_separates_the_faces_of_a_ridge():
 @pytest.mark.parametrize("noise", [0.1, 0.2])
 def test_boundary_found_on_a_noisy_line_scan(data_dir, noise):
     """Scan lines leave three to five one-ring neighbours, whose normals seed the two-plane
-    fit badly; the sweep seed recovers the edge (before it: F1 0.60 / 0.58, now 0.67 / 0.66)."""
+    fit badly; the sweep seed recovers the edge (before it: F1 0.60 / 0.58, with it 0.67 /
+    0.66), and points whose fit still fails borrow a neighbour's edge (0.73 / 0.71)."""
     V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
     s = synthetic.spacing(synthetic.scan(V, F, n_points=12000, seed=0)[0])
     X, _ = synthetic.scan(V, F, n_points=12000, noise=noise * s, seed=0)
     seg = V[synthetic.sharp_edges(V, F)]
     res = simplify_points(X, ratio=0.2, options=SimplifyOptions(progressive=False))
     bd = metrics.boundary_detection(X, res.boundary, edge_segments=seg, spacing=s)
-    assert bd["f1"] >= 0.63, bd
+    assert bd["f1"] >= 0.69, bd
     assert bd["precision"] >= 0.75, bd
+
+
+def _naive_borrow(X, dn, dn_cnt, candidate, distance, angle, line, local, width):
+    """Step 3 by Python loops: each failed candidate's two-ring, lenders, numpy distances."""
+    out, angle_out = distance.copy(), angle.copy()
+    for p in np.flatnonzero(candidate & ~np.isfinite(distance) & (local > 0)):
+        one = set(dn[p, :dn_cnt[p]].tolist())
+        two = set(one)
+        for q in one:
+            two.update(dn[q, :dn_cnt[q]].tolist())
+        two.discard(p)
+        for q in sorted(two):
+            if distance[q] <= width and angle[q] >= edge_fit.SOFT_ANGLE:
+                d = np.linalg.norm(np.cross(X[p] - line[q, :3], line[q, 3:])) / local[p]
+                if d < out[p] and d <= edge_fit.BORROW_WIDTH * width:
+                    out[p], angle_out[p] = d, angle[q]
+    return out, angle_out
+
+
+def test_borrow_equals_a_naive_search(data_dir):
+    V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
+    s = synthetic.spacing(synthetic.scan(V, F, n_points=6000, seed=0)[0])
+    X, _ = synthetic.scan(V, F, n_points=6000, noise=0.1 * s, seed=0)
+    X = X - X.mean(0)
+    st = neighbourhoods(X, scale_of(X))
+    n = len(X)
+    dev, smooth, nn = np.empty(n), np.empty((n, 3)), np.empty(n)
+    edge_fit.smoothed_deviations(X, st.dn, st.dn_cnt, smooth, dev)
+    edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
+    cand = dev > edge_fit.CANDIDATE
+    dist, ang, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
+    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, cand, dist, ang, line, local)
+    fitted = np.isfinite(dist)
+    np.testing.assert_allclose(np.linalg.norm(line[fitted, 3:], axis=1), 1.0, atol=1e-12)
+    for width in (1.0, 0.5):
+        out, out_angle = np.empty(n), np.empty(n)
+        edge_fit.borrow(X, st.dn, st.dn_cnt, cand, dist, ang, line, local, width, out,
+                        out_angle)
+        ref, ref_angle = _naive_borrow(X, st.dn, st.dn_cnt, cand, dist, ang, line, local,
+                                       width)
+        np.testing.assert_allclose(out, ref, rtol=1e-12)
+        np.testing.assert_array_equal(out_angle, ref_angle)
+        lent = cand & ~fitted & np.isfinite(out)
+        assert lent.sum() > 20  # the scan has failed fits beside good ones
+        assert (out[fitted] == dist[fitted]).all()
 
 
 @pytest.mark.parametrize("noise", [0.0, 0.1])
@@ -175,10 +222,12 @@ def test_boundary_is_thin_on_fandisk(data_dir, noise):
     seg = V[synthetic.sharp_edges(V, F)]
     res = simplify_points(X, ratio=0.2, options=SimplifyOptions(progressive=False))
     bd = metrics.boundary_detection(X, res.boundary, edge_segments=seg, spacing=s)
-    assert bd["f1"] >= 0.8, bd
+    assert bd["f1"] >= 0.88, bd  # 0.93 / 0.90 (0.91 / 0.88 before borrowed edges)
+    # thin: about as many flags as points within one spacing of an edge, unlike the paper's
+    assert res.boundary.sum() < 1.1 * bd["n_positive"], bd
     paper = simplify_points(X, ratio=0.2, options=SimplifyOptions(mode="paper",
                                                                   progressive=False))
-    assert res.boundary.sum() < 0.6 * paper.boundary.sum()
+    assert res.boundary.sum() < 0.7 * paper.boundary.sum()
 
 
 def test_coverage_mode_leaves_no_holes_on_a_plate():

@@ -23,6 +23,8 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    flagged only when it lies within ``width`` local spacings of that line (local spacing: the
    median nearest-neighbour distance over the two-ring) — ``SOFT_WIDTH`` of that where the
    planes meet at less than ``SOFT_ANGLE`` (:func:`band`).
+3. **Borrowed edges** — a candidate whose own fit fails is located by the line of a flagged
+   neighbour on a sharp edge (:func:`borrow`).
 
 So flags are the points "on or within about one spacing of a sharp edge" — the ground truth of
 DESIGN.md §4 — whatever the noise and the scan-line anisotropy.
@@ -46,6 +48,11 @@ MIN_ANGLE = 45.0
 SOFT_ANGLE = 60.0
 #: band width of soft edges, as a fraction of the ``width`` of sharper ones
 SOFT_WIDTH = 0.7
+#: band width of borrowed edges (:func:`borrow`), as a fraction of ``width``: only the points
+#: right on the edge, where fits fail most (0.5 against 1.0 on the 37 quality cases: Hausdorff
+#: within 1.2x the best peer's on 28 against 22, featuretype flags 3,064 against 3,468 of its
+#: 4,000 budget)
+BORROW_WIDTH = 0.5
 #: each side of a fitted edge needs at least this many points
 MIN_SIDE = 3
 #: a side of the fit may deviate from its plane by at most this RMS (local spacings)
@@ -256,7 +263,7 @@ def _project(X, idx, c, p, t1, t2, angle, proj):
 
 
 @jit
-def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing, proj):
+def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing, proj, line):
     """Step 2: ``(distance, angle)`` from ``idx[0]`` to the edge of a two-plane fit of
     ``idx[:c]``, and the angle between the two planes (degrees, 0-90).
 
@@ -264,20 +271,41 @@ def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing, proj)
     starts from the normal seeds; if that fails, once more from the line sweep
     (:func:`_seed_by_sweep`). ``proj`` is a work array of length ``c`` or more. The distance
     is ``inf`` when the points are not two planes meeting at a sharp edge (see
-    :func:`_fit_edge`).
+    :func:`_fit_edge`); otherwise ``line`` holds the edge (:func:`_edge_line`).
     """
     _seed_by_normals(normals, idx, c, side)
-    d, angle = _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing)
+    d, angle = _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line)
     if d < np.inf:
         return d, angle
     # c1, n1, c2 serve as the sweep's frame (normal, t1, t2): the fit overwrites them anyway
     if not _seed_by_sweep(X, idx, c, side, proj, c1, n1, c2, work):
         return np.inf, 0.0
-    return _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing)
+    return _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line)
 
 
 @jit
-def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing):
+def _edge_line(c1, n1, c2, n2, line):
+    """The line where the planes through ``c1`` and ``c2`` with unit normals ``n1`` and ``n2``
+    (not parallel) meet: ``line[:3]`` its point nearest the origin, ``line[3:]`` its unit
+    direction ``n1 × n2 / |n1 × n2|``."""
+    cs = n1[0] * n2[0] + n1[1] * n2[1] + n1[2] * n2[2]
+    ux = n1[1] * n2[2] - n1[2] * n2[1]
+    uy = n1[2] * n2[0] - n1[0] * n2[2]
+    uz = n1[0] * n2[1] - n1[1] * n2[0]
+    d1 = c1[0] * n1[0] + c1[1] * n1[1] + c1[2] * n1[2]
+    d2 = c2[0] * n2[0] + c2[1] * n2[1] + c2[2] * n2[2]
+    det = 1.0 - cs * cs
+    ga = (d1 - cs * d2) / det
+    gb = (d2 - cs * d1) / det
+    un = np.sqrt(ux * ux + uy * uy + uz * uz)
+    line[0] = ga * n1[0] + gb * n2[0]
+    line[1] = ga * n1[1] + gb * n2[1]
+    line[2] = ga * n1[2] + gb * n2[2]
+    line[3], line[4], line[5] = ux / un, uy / un, uz / un
+
+
+@jit
+def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
     """Two-plane k-means from the split ``side``, then ``(distance, angle)``: the distance from
     ``idx[0]`` to the planes' line of intersection and the angle between the planes (degrees,
     0-90).
@@ -321,15 +349,9 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing):
     if abs(cs) > np.cos(np.deg2rad(MIN_ANGLE)):
         return np.inf, 0.0
     # each side on its own side of the line: offsets along t_i = u x n_i, u = n1 x n2
-    ux = n1[1] * n2[2] - n1[2] * n2[1]
-    uy = n1[2] * n2[0] - n1[0] * n2[2]
-    uz = n1[0] * n2[1] - n1[1] * n2[0]
-    d1 = c1[0] * n1[0] + c1[1] * n1[1] + c1[2] * n1[2]
-    d2 = c2[0] * n2[0] + c2[1] * n2[1] + c2[2] * n2[2]
+    _edge_line(c1, n1, c2, n2, line)
+    lx, ly, lz, ux, uy, uz = line[0], line[1], line[2], line[3], line[4], line[5]
     det = 1.0 - cs * cs
-    ga = (d1 - cs * d2) / det
-    gb = (d2 - cs * d1) / det
-    lx, ly, lz = ga * n1[0] + gb * n2[0], ga * n1[1] + gb * n2[1], ga * n1[2] + gb * n2[2]
     for which in range(2):
         nx, ny, nz = (n1[0], n1[1], n1[2]) if which == 0 else (n2[0], n2[1], n2[2])
         tx, ty, tz = uy * nz - uz * ny, uz * nx - ux * nz, ux * ny - uy * nx
@@ -371,9 +393,11 @@ def nearest_distances(X, start, cnt, pool, out):
 
 
 @jit
-def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle):
+def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local):
     """Step 2 for every candidate: ``out[p]`` = edge distance / local spacing (inf: no edge),
-    ``angle[p]`` = the angle between the fitted planes (degrees, 0-90; 0 where no edge).
+    ``angle[p]`` = the angle between the fitted planes (degrees, 0-90; 0 where no edge),
+    ``line[p]`` = the fitted edge line where there is one (:func:`_edge_line`; undefined
+    elsewhere), ``local[p]`` = the local spacing (0 for points that are not candidates).
 
     Local spacing: the median over ``p`` and its two-ring of ``nn`` (each point's distance to
     its nearest neighbour, :func:`nearest_distances`).
@@ -392,6 +416,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle):
     for p in range(n):
         out[p] = np.inf
         angle[p] = 0.0
+        local[p] = 0.0
         if not candidate[p]:
             continue
         idx[0] = p
@@ -399,10 +424,54 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle):
         for j in range(c):
             vals[j] = nn[idx[j]]
         s = np.median(vals[:c])
+        local[p] = s
         if s <= 0.0:
             continue
-        d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj)
+        d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
+                                    line[p])
         out[p] = d / s
+
+
+@jit
+def borrow(X, dn, dn_cnt, candidate, distance, angle, line, local, width, out, angle_out):
+    """Step 3: candidates whose own fit failed take the edge of a flagged sharp neighbour.
+
+    ``out[p]``, ``angle_out[p]``: for a candidate with no fit of its own (``distance`` inf),
+    the distance in its local spacings to the nearest fitted line (``line``) among the points
+    of its two-ring that lie within ``width`` of their own line on an edge of ``SOFT_ANGLE``
+    or more, and that line's angle — if within ``BORROW_WIDTH * width``, else inf; every other
+    point keeps ``distance`` and ``angle``.
+
+    Beyond the paper. Right on a scanned edge a two-ring can split into two planes badly (three
+    to five one-ring neighbours on anisotropic scan lines, a seed across the noise) while the
+    fits a spacing or two along the edge find it to within a tenth of a spacing; so a point on
+    the same edge is located by their line. Measured on the 37 quality cases against no
+    borrowing: boundary F1 median 0.681 -> 0.716 (even CAD parts), 0.460 -> 0.500 (scans);
+    mean surface error lower on 32 of 36 CAD cases (geometric mean -3.8 %; Fandisk scan 8.90
+    -> 8.47, angle_block scan 8.30 -> 7.54), edge coverage up on 31 (featuretype 0.836 ->
+    0.902, now above every peer); Hausdorff +1.9 % (more flags, less budget for the faces). Only sharp edges lend: borrowed crease flags cost the Bunny its mean-error lead
+    (17.50 with, 17.17 without the angle rule, at full width; 17.00 now, best peer 17.27).
+    """
+    n = X.shape[0]
+    mark = np.zeros(n, dtype=np.int64)
+    ring = np.empty(MAX_RING, dtype=np.int64)
+    for p in range(n):
+        out[p] = distance[p]
+        angle_out[p] = angle[p]
+        if not candidate[p] or distance[p] < np.inf or local[p] <= 0.0:
+            continue
+        c = gather_rings(p, dn, dn_cnt, FIT_RINGS, mark, ring)
+        for j in range(c):
+            q = ring[j]
+            if not (distance[q] <= width and angle[q] >= SOFT_ANGLE):
+                continue
+            vx, vy, vz = X[p, 0] - line[q, 0], X[p, 1] - line[q, 1], X[p, 2] - line[q, 2]
+            ux, uy, uz = line[q, 3], line[q, 4], line[q, 5]
+            cx, cy, cz = vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux
+            d = np.sqrt(cx * cx + cy * cy + cz * cz) / local[p]
+            if d < out[p] and d <= BORROW_WIDTH * width:
+                out[p] = d
+                angle_out[p] = angle[q]
 
 
 def band(distance, angle, width):

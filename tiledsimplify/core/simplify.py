@@ -161,7 +161,8 @@ def boundary_flags(Xu, st, options):
 
     ``"paper"``: the one-ring measure with the automatic threshold (§3.1). ``"coverage"``: the
     two-ring measure, candidates above the threshold, then only those within
-    ``options.edge_width`` local spacings of a fitted edge line, less beside a soft edge
+    ``options.edge_width`` local spacings of a fitted edge line — their own or, where their
+    fit fails, a flagged neighbour's (:func:`.edge_fit.borrow`) — less beside a soft edge
     (:func:`.edge_fit.band`).
     """
     m = Xu.shape[0]
@@ -182,10 +183,13 @@ def boundary_flags(Xu, st, options):
                  else float(options.boundary_threshold))
     nn = np.empty(m)
     edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
-    distance = np.empty(m)
-    angle = np.empty(m)
-    edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, distance,
-                      angle)
+    candidate = deviation > threshold
+    fitted, fitted_angle, line, local = np.empty(m), np.empty(m), np.empty((m, 6)), np.empty(m)
+    edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, candidate, fitted, fitted_angle,
+                      line, local)
+    distance, angle = np.empty(m), np.empty(m)
+    edge_fit.borrow(Xu, st.dn, st.dn_cnt, candidate, fitted, fitted_angle, line, local,
+                    options.edge_width, distance, angle)
     return deviation, edge_fit.band(distance, angle, options.edge_width), threshold
 
 
