@@ -171,7 +171,7 @@ def test_boundary_found_on_a_noisy_line_scan(data_dir, noise):
 def _naive_borrow(X, dn, dn_cnt, candidate, distance, angle, line, local, width):
     """Step 3 by Python loops: each failed candidate's two-ring, lenders, numpy distances."""
     out, angle_out = distance.copy(), angle.copy()
-    for p in np.flatnonzero(candidate & ~np.isfinite(distance) & (local > 0)):
+    for p in np.flatnonzero(candidate & ~np.isfinite(distance)):
         one = set(dn[p, :dn_cnt[p]].tolist())
         two = set(one)
         for q in one:
@@ -202,8 +202,7 @@ def test_borrow_equals_a_naive_search(data_dir):
     np.testing.assert_allclose(np.linalg.norm(line[fitted, 3:], axis=1), 1.0, atol=1e-12)
     for width in (1.0, 0.5):
         out, out_angle = np.empty(n), np.empty(n)
-        edge_fit.borrow(X, st.dn, st.dn_cnt, cand, dist, ang, line, local, width, out,
-                        out_angle)
+        edge_fit.borrow(X, st.dn, st.dn_cnt, dist, ang, line, local, width, out, out_angle)
         ref, ref_angle = _naive_borrow(X, st.dn, st.dn_cnt, cand, dist, ang, line, local,
                                        width)
         np.testing.assert_allclose(out, ref, rtol=1e-12)

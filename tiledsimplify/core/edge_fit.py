@@ -264,8 +264,8 @@ def _project(X, idx, c, p, t1, t2, angle, proj):
 
 @jit
 def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing, proj, line):
-    """Step 2: ``(distance, angle)`` from ``idx[0]`` to the edge of a two-plane fit of
-    ``idx[:c]``, and the angle between the two planes (degrees, 0-90).
+    """Step 2: ``(distance, angle)`` — the distance from ``idx[0]`` to the edge of a two-plane
+    fit of ``idx[:c]`` and the angle between the two planes (degrees, 0-90).
 
     ``normals`` are one-ring normals (sharper across the edge than smoothed ones). The fit
     starts from the normal seeds; if that fails, once more from the line sweep
@@ -305,14 +305,23 @@ def _edge_line(c1, n1, c2, n2, line):
 
 
 @jit
+def _line_distance(X, p, line):
+    """Distance from ``X[p]`` to the line ``line`` (:func:`_edge_line`): ``|(x - a) × u|``."""
+    vx, vy, vz = X[p, 0] - line[0], X[p, 1] - line[1], X[p, 2] - line[2]
+    ux, uy, uz = line[3], line[4], line[5]
+    cx, cy, cz = vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux
+    return np.sqrt(cx * cx + cy * cy + cz * cz)
+
+
+@jit
 def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
     """Two-plane k-means from the split ``side``, then ``(distance, angle)``: the distance from
     ``idx[0]`` to the planes' line of intersection and the angle between the planes (degrees,
     0-90).
 
-    The distance is ``inf`` when the points are not two planes meeting at a sharp edge: a side with
-    fewer than ``MIN_SIDE`` points or spread less than ``MIN_SPREAD`` spacings across (a row,
-    not a face), planes within ``MIN_ANGLE`` of parallel, or a side whose RMS distance to its
+    The distance is ``inf`` when the points are not two planes meeting at a sharp edge: a side
+    with fewer than ``MIN_SIDE`` points or spread less than ``MIN_SPREAD`` spacings across (a
+    row, not a face), planes within ``MIN_ANGLE`` of parallel, or a side whose RMS distance to its
     plane exceeds ``MAX_RMS`` spacings (a curved or rough patch, not two faces), or sides that
     do not lie each on its own side of the line (more than ``MAX_MIXED`` of a side's points
     farther than half a spacing from the line on the wrong side: a noisy surface split in two
@@ -351,7 +360,6 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
     # each side on its own side of the line: offsets along t_i = u x n_i, u = n1 x n2
     _edge_line(c1, n1, c2, n2, line)
     lx, ly, lz, ux, uy, uz = line[0], line[1], line[2], line[3], line[4], line[5]
-    det = 1.0 - cs * cs
     for which in range(2):
         nx, ny, nz = (n1[0], n1[1], n1[2]) if which == 0 else (n2[0], n2[1], n2[2])
         tx, ty, tz = uy * nz - uz * ny, uz * nx - ux * nz, ux * ny - uy * nx
@@ -369,13 +377,7 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
                 neg += 1
         if min(pos, neg) > MAX_MIXED * (pos + neg):
             return np.inf, 0.0
-    # closest point of the line {x: (x-c1).n1 = 0, (x-c2).n2 = 0} to X[p]: X[p] - al n1 - be n2
-    r1 = (X[p, 0] - c1[0]) * n1[0] + (X[p, 1] - c1[1]) * n1[1] + (X[p, 2] - c1[2]) * n1[2]
-    r2 = (X[p, 0] - c2[0]) * n2[0] + (X[p, 1] - c2[1]) * n2[1] + (X[p, 2] - c2[2]) * n2[2]
-    al = (r1 - cs * r2) / det
-    be = (r2 - cs * r1) / det
-    d2 = al * al + be * be + 2.0 * al * be * cs
-    return np.sqrt(max(d2, 0.0)), np.rad2deg(np.arccos(min(abs(cs), 1.0)))
+    return _line_distance(X, p, line), np.rad2deg(np.arccos(min(abs(cs), 1.0)))
 
 
 @jit
@@ -433,11 +435,11 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local):
 
 
 @jit
-def borrow(X, dn, dn_cnt, candidate, distance, angle, line, local, width, out, angle_out):
+def borrow(X, dn, dn_cnt, distance, angle, line, local, width, out, angle_out):
     """Step 3: candidates whose own fit failed take the edge of a flagged sharp neighbour.
 
-    ``out[p]``, ``angle_out[p]``: for a candidate with no fit of its own (``distance`` inf),
-    the distance in its local spacings to the nearest fitted line (``line``) among the points
+    ``out[p]``, ``angle_out[p]``: for a candidate with no fit of its own (``distance`` inf;
+    candidates are the points with a positive ``local`` spacing, :func:`localise`), the distance in its local spacings to the nearest fitted line (``line``) among the points
     of its two-ring that lie within ``width`` of their own line on an edge of ``SOFT_ANGLE``
     or more, and that line's angle — if within ``BORROW_WIDTH * width``, else inf; every other
     point keeps ``distance`` and ``angle``.
@@ -449,8 +451,9 @@ def borrow(X, dn, dn_cnt, candidate, distance, angle, line, local, width, out, a
     borrowing: boundary F1 median 0.681 -> 0.716 (even CAD parts), 0.460 -> 0.500 (scans);
     mean surface error lower on 32 of 36 CAD cases (geometric mean -3.8 %; Fandisk scan 8.90
     -> 8.47, angle_block scan 8.30 -> 7.54), edge coverage up on 31 (featuretype 0.836 ->
-    0.902, now above every peer); Hausdorff +1.9 % (more flags, less budget for the faces). Only sharp edges lend: borrowed crease flags cost the Bunny its mean-error lead
-    (17.50 with, 17.17 without the angle rule, at full width; 17.00 now, best peer 17.27).
+    0.902, now above every peer); Hausdorff +1.9 % (more flags, less budget for the faces).
+    Only sharp edges lend: borrowed crease flags cost the Bunny its mean-error lead (17.50
+    with, 17.17 without the angle rule, at full width; 17.00 now, best peer 17.27).
     """
     n = X.shape[0]
     mark = np.zeros(n, dtype=np.int64)
@@ -458,17 +461,14 @@ def borrow(X, dn, dn_cnt, candidate, distance, angle, line, local, width, out, a
     for p in range(n):
         out[p] = distance[p]
         angle_out[p] = angle[p]
-        if not candidate[p] or distance[p] < np.inf or local[p] <= 0.0:
+        if distance[p] < np.inf or local[p] <= 0.0:
             continue
         c = gather_rings(p, dn, dn_cnt, FIT_RINGS, mark, ring)
         for j in range(c):
             q = ring[j]
             if not (distance[q] <= width and angle[q] >= SOFT_ANGLE):
                 continue
-            vx, vy, vz = X[p, 0] - line[q, 0], X[p, 1] - line[q, 1], X[p, 2] - line[q, 2]
-            ux, uy, uz = line[q, 3], line[q, 4], line[q, 5]
-            cx, cy, cz = vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux
-            d = np.sqrt(cx * cx + cy * cy + cz * cz) / local[p]
+            d = _line_distance(X, p, line[q]) / local[p]
             if d < out[p] and d <= BORROW_WIDTH * width:
                 out[p] = d
                 angle_out[p] = angle[q]

@@ -18,12 +18,12 @@ strength (3: ``w`` = 1 / spacing) Eq. (1) outweighs the spacing term only where 
 curvature is below about half a spacing — creases; smooth regions are thinned evenly, which
 measured lower mean surface error than strength 1 on 31 of the 37 quality cases. Both terms
 depend only on ``DN_p`` and the normals of ``DN_p``, so the exact two-ring updates of the
-removal loop stay exact. A point whose neighbours are all boundary points has no Eq. (1) term here (0) rather
-than ``+inf``; a point with no local-mesh neighbour at all (none within the Voronoi reach, see
-:mod:`.voronoi`) gets ``+inf``: it is the only point covering its surroundings. (Measured
-alternative, not kept: ``h = radius + nearest distance``, a running bound on the Hausdorff
-radius each point covers, inherited by the nearest neighbour on removal — worse Hausdorff on
-Fandisk at 20 %, 210 vs 188 × 1e-4 of the diagonal.)
+removal loop stay exact. A point whose neighbours are all boundary points has no Eq. (1) term
+here (0) rather than ``+inf``; a point with no local-mesh neighbour at all (none within the
+Voronoi reach, see :mod:`.voronoi`) gets ``+inf``: it is the only point covering its
+surroundings. (Measured alternative, not kept: ``h = radius + nearest distance``, a running
+bound on the Hausdorff radius each point covers, inherited by the nearest neighbour on removal
+— worse Hausdorff on Fandisk at 20 %, 210 vs 188 × 1e-4 of the diagonal.)
 
 Measures are selected by name and dispatched by a small integer inside the removal kernel, so
 new measures plug in without touching the loop.

@@ -183,12 +183,11 @@ def boundary_flags(Xu, st, options):
                  else float(options.boundary_threshold))
     nn = np.empty(m)
     edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
-    candidate = deviation > threshold
     fitted, fitted_angle, line, local = np.empty(m), np.empty(m), np.empty((m, 6)), np.empty(m)
-    edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, candidate, fitted, fitted_angle,
-                      line, local)
+    edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, fitted,
+                      fitted_angle, line, local)
     distance, angle = np.empty(m), np.empty(m)
-    edge_fit.borrow(Xu, st.dn, st.dn_cnt, candidate, fitted, fitted_angle, line, local,
+    edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local,
                     options.edge_width, distance, angle)
     return deviation, edge_fit.band(distance, angle, options.edge_width), threshold
 

@@ -245,7 +245,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     if not 0.0 < float(floor) < 1.0:
         raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
                          f"first runs down to), got {floor!r}; the default is 0.5.")
-    if output.suffix.lower() in (".las", ".laz") and not source.is_las:
+    if output.suffix.lower() in LAS_SUFFIXES and not source.is_las:
         raise InputError(f"{output}: LAS/LAZ output needs LAS/LAZ input (it keeps the input's "
                          "point records); write .ply, .npy, .xyz or .csv instead.")
     check_output(output, LAS_SUFFIXES)
@@ -429,7 +429,7 @@ def _write_output(ts, source, output, prefix, refined=False):
     """Write the kept core points of every tile, tile by tile (memory bounded by a tile):
     the refined flags if ``refined``, else the cut's."""
     n_out = n_boundary = 0
-    if output.suffix.lower() in (".las", ".laz"):
+    if output.suffix.lower() in LAS_SUFFIXES:
         from ..io.las import LasOutput
         with LasOutput(output, source.template_header()) as out:
             for i in range(ts.n_tiles):
