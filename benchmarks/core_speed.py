@@ -3,7 +3,8 @@
 Each case runs in its own process (peak RSS is per process). Peers timed in the same process:
 scipy's Qhull 3-D Delaunay and a cKDTree 17-nearest query on the same points — the two library
 calls a per-point neighbourhood method cannot avoid — so the table reads as ratios that hold
-across machines. The JIT is warmed first. Clouds:
+across machines; and the core's own Delaunay (:mod:`tiledsimplify.core.delaunay`, which
+replaced Qhull in the default mode) on the same points, without the guard points. The JIT is warmed first. Clouds:
 
 * ``scan``: Fandisk seen by the project's line scanner (3 views, lines 4x sparser than samples
   along a line, noise 0.1 x spacing) — a realistic scan of a machined part;
@@ -57,12 +58,17 @@ def one(kind, n):
     from scipy.spatial import Delaunay, cKDTree
 
     from tiledsimplify import SimplifyOptions, simplify_points
+    from tiledsimplify.core.delaunay import delaunay_tets
     simplify_points(cloud("flat", 2000), ratio=0.2)  # warm the JIT
     X = cloud(kind, n)
     n = len(X)
     t = time.perf_counter()
     Delaunay(X - X.mean(0), qhull_options="Qbb Qc Qz Q12")
     t_qhull = time.perf_counter() - t
+    delaunay_tets(X[:2000])  # warm the JIT
+    t = time.perf_counter()
+    delaunay_tets(X - X.mean(0))
+    t_ours = time.perf_counter() - t
     t = time.perf_counter()
     cKDTree(X).query(X, k=17)
     t_knn = time.perf_counter() - t
@@ -73,7 +79,7 @@ def one(kind, n):
     simplify_points(X, ratio=0.2)
     t_prog = time.perf_counter() - t
     st = res.stats
-    return {"case": kind, "n": n, "qhull": t_qhull, "knn17": t_knn, "core": t_core, "progressive": t_prog,
+    return {"case": kind, "n": n, "qhull": t_qhull, "delaunay": t_ours, "knn17": t_knn, "core": t_core, "progressive": t_prog,
             "neighbours": st["seconds_neighbours_normals"], "removal": st["seconds_removal"],
             "refine": st.get("seconds_refine", 0.0),
             "boundary": st["n_boundary"],
@@ -88,14 +94,14 @@ def main(cases):
                              capture_output=True, text=True).stdout
         rows.append(json.loads(out.strip().splitlines()[-1]))
     print("| cloud | points | core s | µs/pt | pts/s | neighbours s | removal s | refine s "
-          "| progressive s | Qhull s | kNN-17 s | core / Qhull | peak RSS MB |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| progressive s | Qhull s | our Delaunay s | kNN-17 s | core / Qhull | peak RSS MB |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         n = r["n"]
         print(f"| {r['case']} | {n:,} | {r['core']:.2f} | {1e6 * r['core'] / n:.0f} | {n / r['core']:,.0f} "
               f"| {r['neighbours']:.2f} | {r['removal']:.2f} | {r.get('refine', 0.0):.2f} "
               f"| {r['progressive']:.2f} "
-              f"| {r['qhull']:.2f} | {r['knn17']:.2f} | {r['core'] / r['qhull']:.1f}x "
+              f"| {r['qhull']:.2f} | {r.get('delaunay', float('nan')):.2f} | {r['knn17']:.2f} | {r['core'] / r['qhull']:.1f}x "
               f"| {r['rss_mb']:.0f} |")
 
 

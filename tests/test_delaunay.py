@@ -26,24 +26,7 @@ def test_tetrahedra_are_positive_empty_and_fill_the_hull(kind):
     rng = np.random.default_rng(3)
     X = _cloud(kind, rng)
     T = delaunay.delaunay_tets(X)
-    a, b, c, d = (X[T[:, i]] for i in range(4))
-    vol = np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a)) / 6.0
-    assert (vol > 0).all()
-    # every face is shared by at most two tetrahedra (a valid complex, no overlaps)
-    faces = np.sort(np.concatenate([T[:, [1, 2, 3]], T[:, [0, 2, 3]], T[:, [0, 1, 3]],
-                                    T[:, [0, 1, 2]]]), axis=1)
-    _, counts = np.unique(faces, axis=0, return_counts=True)
-    assert counts.max() == 2
-    # the empty-sphere property: no point strictly inside any circumsphere
-    A = 2.0 * np.stack([b - a, c - a, d - a], axis=1)
-    rhs = np.stack([(b * b).sum(1) - (a * a).sum(1), (c * c).sum(1) - (a * a).sum(1),
-                    (d * d).sum(1) - (a * a).sum(1)], axis=1)
-    centre = np.linalg.solve(A, rhs[..., None])[..., 0]
-    radius = np.linalg.norm(centre - a, axis=1)
-    ok = radius < 1e3  # slivers on the hull have huge spheres, badly conditioned
-    inside = cKDTree(X).query_ball_point(centre[ok], radius[ok] * (1.0 - 1e-7),
-                                         return_length=True)
-    assert inside.max() == 0
+    vol = _check_valid(X, T)
     # the tetrahedra fill the convex hull, but for hull slivers the super-tetrahedron hides
     assert vol.sum() == pytest.approx(ConvexHull(X).volume, rel=2e-3)
 
@@ -102,3 +85,44 @@ def test_brio_order_is_a_permutation_in_rounds_of_doubling_size():
     # the last round is the second half of a fixed random permutation, Morton-sorted
     perm = np.random.default_rng(0).permutation(5000)
     assert set(order[2500:].tolist()) == set(perm[2500:].tolist())
+
+
+def _check_valid(X, T, max_radius=1e3):
+    """Positive tetrahedra, no face shared by more than two, no point inside a circumsphere."""
+    a, b, c, d = (X[T[:, i]] for i in range(4))
+    vol = np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a)) / 6.0
+    assert (vol > 0).all()
+    faces = np.sort(np.concatenate([T[:, [1, 2, 3]], T[:, [0, 2, 3]], T[:, [0, 1, 3]],
+                                    T[:, [0, 1, 2]]]), axis=1)
+    assert np.unique(faces, axis=0, return_counts=True)[1].max() == 2
+    A = 2.0 * np.stack([b - a, c - a, d - a], axis=1)
+    rhs = np.stack([(b * b).sum(1) - (a * a).sum(1), (c * c).sum(1) - (a * a).sum(1),
+                    (d * d).sum(1) - (a * a).sum(1)], axis=1)
+    centre = np.linalg.solve(A, rhs[..., None])[..., 0]
+    radius = np.linalg.norm(centre - a, axis=1)
+    ok = radius < max_radius  # slivers on the hull have huge spheres, badly conditioned
+    inside = cKDTree(X).query_ball_point(centre[ok], radius[ok] * (1.0 - 1e-7),
+                                         return_length=True)
+    assert inside.max() == 0
+    return vol
+
+
+def test_quadratic_worst_case_grows_every_buffer():
+    """Points near two skew lines: almost every pair across the lines is a Delaunay edge, so
+    the tetrahedra (~n²/4) outgrow the initial 8 n slots and cavities reach hundreds of
+    tetrahedra (the growth paths of every scratch buffer). Nearly every point is on the hull
+    here, so edges whose empty spheres are huge are hidden by the super-tetrahedron (in the
+    core, guard points keep them away from the edges that matter): the result must be a valid
+    Delaunay complex whose edges are Qhull's."""
+    rng = np.random.default_rng(4)
+    m = 300  # largest cavity 545 tetrahedra with 594 boundary facets (first buffers: 256)
+    t = np.sort(rng.random(m))
+    X = np.concatenate([np.c_[t, np.zeros(m), np.zeros(m)],
+                        np.c_[np.full(m, 0.5), rng.random(m) - 0.5, np.full(m, 0.3)]])
+    X = X + 1e-6 * rng.uniform(-1, 1, X.shape)
+    T = delaunay.delaunay_tets(X)
+    assert T is not None and len(T) > 8 * len(X)
+    _check_valid(X, T)
+    got = {tuple(e) for e in voronoi._simplex_edges(T).tolist()}
+    assert got <= naive.delaunay_edges(X)
+    assert len([e for e in got if (e[0] < m) != (e[1] < m)]) > 0.85 * m * m
