@@ -51,6 +51,25 @@ def _orient(X, a, b, c, d):
 
 
 @jit_inline
+def _orient_face(X, a, b, c, d):
+    """:func:`_orient` evaluated with the face's corners in increasing order (sign fixed by
+    the permutation's parity): the two tetrahedra sharing a face then get bit-identical
+    answers, so rounding cannot make a walk bounce between them forever."""
+    flip = False
+    if a > b:
+        a, b = b, a
+        flip = not flip
+    if b > c:
+        b, c = c, b
+        flip = not flip
+    if a > b:
+        a, b = b, a
+        flip = not flip
+    o = _orient(X, a, b, c, d)
+    return -o if flip else o
+
+
+@jit_inline
 def _insphere(X, a, b, c, d, e):
     """Positive if ``e`` lies inside the circumsphere of the positively oriented (by
     :func:`_orient`) tetrahedron ``abcd``; coordinates taken relative to ``e``."""
@@ -156,7 +175,7 @@ def _build(X, order, n_real):
                 a = tets[t, FACES[i, 0]]
                 b = tets[t, FACES[i, 1]]
                 c = tets[t, FACES[i, 2]]
-                if _orient(X, a, b, c, p) < 0.0:
+                if _orient_face(X, a, b, c, p) < 0.0:
                     u = nbr[t, i]
                     if u >= 0:
                         t = u
@@ -212,7 +231,7 @@ def _build(X, order, n_real):
                         a = tets[T, FACES[i, 0]]
                         b = tets[T, FACES[i, 1]]
                         c = tets[T, FACES[i, 2]]
-                        if _orient(X, a, b, c, p) <= 0.0:
+                        if _orient_face(X, a, b, c, p) <= 0.0:
                             bad = u
                             if u < 0:
                                 return tets[:0], False  # p outside the super-tetrahedron

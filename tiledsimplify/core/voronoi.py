@@ -329,12 +329,13 @@ def candidate_edges(X, reach=math.inf):
             if tets is not None:
                 edges = _simplex_edges(tets)
                 return edges[edges[:, 1] < n], "delaunay"
+        fallback = " (compiled Delaunay failed)" if math.isfinite(reach) else ""
         try:
             tri = Delaunay(C, qhull_options="Qbb Qc Qz Q12")
-            how = "qhull"
+            how = "qhull" + fallback
         except QhullError:
             tri = Delaunay(C, qhull_options="QJ")
-            how = "qhull, joggled"
+            how = "qhull, joggled" + fallback
     edges = _simplex_edges(tri.simplices)
     return edges[edges[:, 1] < n], how
 
