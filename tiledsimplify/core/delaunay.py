@@ -26,7 +26,9 @@ Method (Bowyer 1981; Watson 1981), as in CGAL and Geogram:
 Predicates are plain floating point: the caller shifts the points by a tiny pseudo-random
 jitter, so exact degeneracies (quantised scans) do not occur, and every candidate edge is then
 checked exactly by :func:`.voronoi.filter_candidates` — an extra edge costs a test, never a
-wrong neighbour. Tests compare the edges with Qhull's.
+wrong neighbour. A face's orientation is always evaluated in one corner order, so the two
+tetrahedra sharing it agree bit for bit and a walk cannot bounce between them; raw quantised
+LAS tiles build even without the jitter. Tests compare the edges with Qhull's.
 """
 
 import numpy as np
@@ -38,6 +40,8 @@ from ._jit import jit, jit_inline
 FACES = np.array([[1, 3, 2], [0, 2, 3], [0, 3, 1], [0, 1, 2]], dtype=np.int64)
 #: a walk longer than this many steps per point means broken geometry: give up (fall back)
 MAX_WALK = 100_000
+#: tetrahedron ids are int32 (8 slots per point to start with): larger clouds go to Qhull
+MAX_POINTS = 200_000_000
 
 
 @jit_inline
@@ -365,7 +369,7 @@ def delaunay_tets(P, seed=0):
     """
     P = np.ascontiguousarray(P, dtype=np.float64)
     n = P.shape[0]
-    if n < 4:
+    if n < 4 or n > MAX_POINTS:
         return None
     c = 0.5 * (P.min(axis=0) + P.max(axis=0))
     r = max(float(np.linalg.norm(P.max(axis=0) - P.min(axis=0))), 1e-300)
