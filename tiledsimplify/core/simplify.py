@@ -243,8 +243,8 @@ def neighbourhood_state(xyz, frozen=None, options=None):
     For callers that need the boundary measure of many point sets before they can simplify
     any of them — a tiled run takes one threshold over all tiles. Pass the state to
     ``simplify_points(xyz, ..., frozen=frozen, state=state)`` on the same points and the
-    neighbourhood stage (Qhull and the local meshes, most of the cost before removal) is not
-    computed twice. The result is identical to a run without ``state``.
+    neighbourhood stage (the Delaunay triangulation and the local meshes, most of the cost
+    before removal) is not computed twice. The result is identical to a run without ``state``.
 
     Parameters
     ----------
@@ -300,9 +300,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
 
     Notes
     -----
-    Cost: one 3-D Delaunay triangulation (Qhull) to seed the Voronoi neighbours, then per
-    removed point an exact local update of the neighbourhoods, normals and importance of two
-    rings of points around it (paper §3.3, Fig. 1).
+    Cost: one 3-D Delaunay triangulation (:mod:`.delaunay`; Qhull in mode "paper") to seed the
+    Voronoi neighbours, then per removed point an exact local update of the neighbourhoods,
+    normals and importance of two rings of points around it (paper §3.3, Fig. 1).
 
     References
     ----------
