@@ -4,7 +4,8 @@ Each case runs in its own process (peak RSS is per process). Peers timed in the 
 scipy's Qhull 3-D Delaunay and a cKDTree 17-nearest query on the same points — the two library
 calls a per-point neighbourhood method cannot avoid — so the table reads as ratios that hold
 across machines; and the core's own Delaunay (:mod:`tiledsimplify.core.delaunay`, which
-replaced Qhull in the default mode) on the same points, without the guard points. The JIT is warmed first. Clouds:
+replaced Qhull in the default mode) on the same points, without the guard points (NaN if it
+failed: the core would have used Qhull). The JIT is warmed first. Clouds:
 
 * ``scan``: Fandisk seen by the project's line scanner (3 views, lines 4x sparser than samples
   along a line, noise 0.1 x spacing) — a realistic scan of a machined part;
@@ -67,8 +68,8 @@ def one(kind, n):
     t_qhull = time.perf_counter() - t
     delaunay_tets(X[:2000])  # warm the JIT
     t = time.perf_counter()
-    delaunay_tets(X - X.mean(0))
-    t_ours = time.perf_counter() - t
+    built = delaunay_tets(X - X.mean(0)) is not None
+    t_ours = time.perf_counter() - t if built else float("nan")
     t = time.perf_counter()
     cKDTree(X).query(X, k=17)
     t_knn = time.perf_counter() - t

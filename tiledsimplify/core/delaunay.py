@@ -207,12 +207,9 @@ def _build(X, order, n_real):
                         continue
                     if _insphere(X, tets[u, 0], tets[u, 1], tets[u, 2], tets[u, 3], p) > 0.0:
                         stamp[u] = mark
-                        if n_cav == cavity.size:
-                            cavity = _grow(cavity)
-                            stack = _grow(stack)
-                        cavity[n_cav] = u
+                        cavity = _put(cavity, n_cav, u)
                         n_cav += 1
-                        stack[n_st] = u
+                        stack = _put(stack, n_st, u)
                         n_st += 1
                     else:
                         seen[u] = mark
@@ -225,11 +222,8 @@ def _build(X, order, n_real):
                     u = nbr[T, i]
                     if u >= 0 and stamp[u] == mark:
                         continue
-                    if n_b == bt.size:
-                        bt = _grow(bt)
-                        bf = _grow(bf)
-                    bt[n_b] = T
-                    bf[n_b] = i
+                    bt = _put(bt, n_b, T)
+                    bf = _put(bf, n_b, i)
                     n_b += 1
                     if bad < 0:
                         a = tets[T, FACES[i, 0]]
@@ -242,10 +236,7 @@ def _build(X, order, n_real):
             if bad < 0:
                 break
             stamp[bad] = mark
-            if n_cav == cavity.size:
-                cavity = _grow(cavity)
-                stack = _grow(stack)
-            cavity[n_cav] = bad
+            cavity = _put(cavity, n_cav, bad)
             n_cav += 1
             stack[0] = bad
             n_st = 1
@@ -335,11 +326,15 @@ def _build(X, order, n_real):
     return tets[:n_tets][alive[:n_tets]], True
 
 
-@jit
-def _grow(a):
-    b = np.empty(2 * a.size, dtype=a.dtype)
-    b[:a.size] = a
-    return b
+@jit_inline
+def _put(a, k, value):
+    """``a[k] = value``, first doubling ``a`` if it is full; returns the (possibly new) array."""
+    if k == a.size:
+        b = np.empty(2 * a.size, dtype=a.dtype)
+        b[:k] = a
+        a = b
+    a[k] = value
+    return a
 
 
 @jit

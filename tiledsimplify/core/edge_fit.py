@@ -439,9 +439,10 @@ def borrow(X, dn, dn_cnt, distance, angle, line, local, width, out, angle_out):
     """Step 3: candidates whose own fit failed take the edge of a flagged sharp neighbour.
 
     ``out[p]``, ``angle_out[p]``: for a candidate with no fit of its own (``distance`` inf;
-    candidates are the points with a positive ``local`` spacing, :func:`localise`), the distance in its local spacings to the nearest fitted line (``line``) among the points
-    of its two-ring that lie within ``width`` of their own line on an edge of ``SOFT_ANGLE``
-    or more, and that line's angle — if within ``BORROW_WIDTH * width``, else inf; every other
+    candidates are the points with a positive ``local`` spacing, :func:`localise`), the
+    distance in its local spacings to the nearest fitted line (``line``) among the points of
+    its two-ring that lie within ``width`` of their own line on an edge of ``SOFT_ANGLE`` or
+    more, and that line's angle — if within ``BORROW_WIDTH * width``, else inf; every other
     point keeps ``distance`` and ``angle``.
 
     Beyond the paper. Right on a scanned edge a two-ring can split into two planes badly (three

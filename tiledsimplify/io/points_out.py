@@ -35,7 +35,7 @@ def check_output(path, extra_suffixes=()):
     if path.is_dir():
         raise InputError(f"{path}: is a directory; give a file name for the output.")
     _check_suffix(path, SUFFIXES + tuple(extra_suffixes))
-    directory = path.parent if str(path.parent) else Path(".")
+    directory = path.parent  # Path("out.ply").parent is Path(".")
     if not directory.is_dir():
         raise InputError(f"{path}: the output directory {directory} does not exist; create it "
                          "or write somewhere else.")
@@ -107,7 +107,7 @@ def write_points(path, xyz, columns=None):
     path = Path(path)
     suffix = _check_suffix(path, SUFFIXES)
     table = _table(np.asarray(xyz, dtype=np.float64).reshape(-1, 3), columns or {})
-    directory = path.parent if str(path.parent) else Path(".")
+    directory = path.parent
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=directory)
     try:
         with os.fdopen(fd, "wb") as fh:
