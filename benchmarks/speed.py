@@ -10,6 +10,9 @@ so that no child inherits a large parent's high-water mark. Seconds:
 * ``tiledsimplify <mode> core``: ``simplify_points`` on the in-memory array (JIT warmed first);
 * ``tiledsimplify <mode> pipeline, N workers``: ``tiledsimplify.run`` from the ``.npy`` file to
   an ``.npy`` output (ingest, tiles, global budget, output), local threads;
+* ``tiledsimplify <mode> pipeline LocalCluster 2 processes``: the same on a
+  ``dask.distributed.LocalCluster`` of two one-thread worker processes (started before the
+  clock; peak RSS = the client process's plus both workers');
 * peers: one library call at the setting that keeps the same count (bisection and conversion
   into the library's own container not counted — that favours the peers).
 
@@ -44,6 +47,8 @@ RATIO = 0.2
 #: Song & Feng (2006), section 4: boundary identification + removal, Pentium 4 3.0 GHz.
 PAPER = [("Fandisk", 16_475, 0.2, 190 + 1_253), ("Bunny", 35_947, 0.1, 373 + 1_720)]
 BASELINE = "(baseline: python + numpy + load the cloud)"
+#: the pipeline on a dask.distributed LocalCluster of two one-thread worker processes
+CLUSTER = "pipeline LocalCluster 2 processes"
 
 
 def make_cloud(n, path):
@@ -62,7 +67,7 @@ def method_names(skip=()):
     names = [BASELINE]
     for m in MODES:
         names += [f"tiledsimplify {m} core", f"tiledsimplify {m} pipeline 1 worker",
-                  f"tiledsimplify {m} pipeline 2 workers"]
+                  f"tiledsimplify {m} pipeline 2 workers", f"tiledsimplify {m} {CLUSTER}"]
     names += list(peers.available())
     return [n for n in names if n not in skip]
 
@@ -92,16 +97,35 @@ def one(name, path, count):
             k = peers.ours(mode)(X, count)
             return {"seconds": k.seconds, "kept": k.count, "setting": k.setting}
         from tiledsimplify.pipeline import run
-        workers = int(name.split("pipeline ")[1].split()[0])
         out = Path(path).with_name(f"out_{os.getpid()}.npy")
+        kw = dict(count=count, options=options, tile_points=max(50_000, len(X) // 8),
+                  progress=False)
+        if name.endswith(CLUSTER):
+            return _on_cluster(run, path, out, kw)
+        workers = int(name.split("pipeline ")[1].split()[0])
         t = time.perf_counter()
-        s = run(path, out, count=count, options=options, workers=workers,
-                tile_points=max(50_000, len(X) // 8), progress=False)
+        s = run(path, out, workers=workers, **kw)
         sec = time.perf_counter() - t
         out.unlink(missing_ok=True)
         return {"seconds": sec, "kept": s.n_output, "setting": f"{s.n_tiles} tiles"}
     k = peers.available([name], quiet=True)[name](X, count)
     return {"seconds": k.seconds, "kept": k.count, "setting": k.setting}
+
+
+def _on_cluster(run, path, out, kw):
+    """``run`` on a fresh LocalCluster (2 worker processes, 1 thread each); the seconds
+    exclude starting the cluster, the workers' peak RSS is reported beside the client's."""
+    from dask.distributed import Client, LocalCluster
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        client.run(lambda: None)  # workers up before the clock starts
+        t = time.perf_counter()
+        s = run(path, out, client=client, **kw)
+        sec = time.perf_counter() - t
+        workers_mb = sum(client.run(_vm_hwm_mb).values())
+    out.unlink(missing_ok=True)
+    return {"seconds": sec, "kept": s.n_output, "setting": f"{s.n_tiles} tiles",
+            "workers_rss_mb": workers_mb}
 
 
 def measure(name, path, count, timeout):
@@ -149,9 +173,10 @@ def report(rows):
             print(f"| {r['method']} | {r['n']:,} | – | – | – | – | {r['rss_mb']:,.0f} | – |")
             continue
         sec = r["seconds"]
+        rss = r["rss_mb"] + r.get("workers_rss_mb", 0.0)  # a cluster's: client + workers
         ratio = f"{sec / ref[r['n']]:,.1f}x" if ref.get(r["n"]) else "–"
         print(f"| {r['method']} | {r['n']:,} | {r['kept']:,} | {sec:,.2f} "
-              f"| {r['n'] / sec:,.0f} | {1e6 * sec / r['n']:,.2f} | {r['rss_mb']:,.0f} "
+              f"| {r['n'] / sec:,.0f} | {1e6 * sec / r['n']:,.2f} | {rss:,.0f} "
               f"| {ratio} |")
 
 
