@@ -21,7 +21,11 @@ Construction
     Clouds of affine rank 2 (a flat plate) use the 2-D Delaunay of the plane, rank 1 the chain
     along the line, and tiny or Qhull-rejected clouds all pairs or a joggled (``QJ``)
     triangulation as candidates; the positive-area filter then decides on the exact
-    coordinates in every case.
+    coordinates in every case. Most candidates are accepted without clipping: a point of the
+    bisector plane found by :func:`facet_witness` (the midpoint, moved once past each
+    constraint it violates) that lies well inside every constraint proves the facet positive
+    (56-65 % of the candidates of a scan, the Bunny and a flat cloud; the filter 0.53 -> 0.29
+    s on 100k scan points, the same edges on all 37 quality cases in both modes).
 
 Maintenance (paper §3.3)
     When ``p`` is removed, the cells of its Voronoi neighbours grow into the space ``p`` owned.
@@ -160,6 +164,66 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
     return area(n, xb, yb) > 0.0 and (r2 == math.inf or origin_distance2(n, xb, yb) < r2)
 
 
+#: rounds of projections :func:`facet_witness` tries before the clipping decides
+WITNESS_ROUNDS = 1
+
+
+@jit
+def facet_witness(X, a, b, cand, ncand, half, tol, reach):
+    """True if a point found without clipping proves the facet of ``a``, ``b`` positive.
+
+    A cheap sufficient test for :func:`facet_positive` (``inside < 0``). A point ``c`` of the
+    bisector plane within ``reach - 5 tol`` of the midpoint ``m`` that lies at least ``4 tol``
+    inside every constraint of ``cand[:ncand]`` (closer to ``a`` than to ``s`` by that distance
+    to their bisector) keeps a disc of radius ``3 tol`` around it in every shrunk half-plane —
+    the distance within the plane is at least the distance in space — so the clipped facet has
+    positive area and reaches the disc of ``reach``. ``c`` starts at ``m`` (a Gabriel edge
+    passes at once: about a third of the Delaunay edges of a scan) and is projected, within the
+    bisector plane, past each violated constraint for ``WITNESS_ROUNDS`` rounds. False means
+    nothing: the clipping decides.
+    """
+    ax, ay, az = X[a, 0], X[a, 1], X[a, 2]
+    mx, my, mz = 0.5 * (X[b, 0] - ax), 0.5 * (X[b, 1] - ay), 0.5 * (X[b, 2] - az)
+    L2 = 4.0 * (mx * mx + my * my + mz * mz)
+    if L2 == 0.0:
+        return False
+    L = math.sqrt(L2)
+    r = half  # the clipping square holds the disc of radius half
+    if reach < math.inf:
+        r = min(r, math.sqrt(max(reach * reach - 0.25 * L2, 0.0)))
+    r -= 5.0 * tol
+    if r <= 0.0:
+        return False
+    ux, uy, uz = 2.0 * mx / L, 2.0 * my / L, 2.0 * mz / L
+    cx, cy, cz = mx, my, mz  # the witness, relative to a
+    for rnd in range(WITNESS_ROUNDS + 1):
+        ok = True
+        for k in range(ncand):
+            q = cand[k]
+            if q == a or q == b:
+                continue
+            sx, sy, sz = X[q, 0] - ax, X[q, 1] - ay, X[q, 2] - az
+            s2 = sx * sx + sy * sy + sz * sz
+            h = s2 - 2.0 * (sx * cx + sy * cy + sz * cz)  # 2|s| x (distance of c inside)
+            if h >= tol * L and h * h >= 64.0 * tol * tol * s2:
+                continue
+            ok = False
+            if rnd == WITNESS_ROUNDS:
+                break
+            # move c along the in-plane part of s until it is 8 tol inside
+            su = sx * ux + sy * uy + sz * uz
+            px, py, pz = sx - su * ux, sy - su * uy, sz - su * uz
+            p2 = px * px + py * py + pz * pz
+            if p2 <= 1e-24 * s2:
+                return False  # s on the line ab, blocking it
+            t = (16.0 * tol * math.sqrt(s2) - h) / (2.0 * p2)
+            cx, cy, cz = cx - t * px, cy - t * py, cz - t * pz
+        if ok:
+            dx, dy, dz = cx - mx, cy - my, cz - mz
+            return dx * dx + dy * dy + dz * dz < r * r
+    return False
+
+
 @jit
 def filter_candidates(X, start, cnt, pool, half, tol, reach):
     """Keep the candidate edges whose facet has positive area; returns a (k, 2) edge array.
@@ -192,8 +256,9 @@ def filter_candidates(X, start, cnt, pool, half, tol, reach):
             b = cand[j]
             if b <= a:
                 continue
-            if facet_positive(X, a, b, cand, cnt[a], half, tol, reach, xa, ya, la, xb, yb, lb,
-                              frame, -1):
+            if (facet_witness(X, a, b, cand, cnt[a], half, tol, reach)
+                    or facet_positive(X, a, b, cand, cnt[a], half, tol, reach, xa, ya, la, xb,
+                                      yb, lb, frame, -1)):
                 out[k, 0] = a
                 out[k, 1] = b
                 k += 1
