@@ -173,11 +173,12 @@ def facet_witness(X, a, b, cand, ncand, half, tol, reach):
     """True if a point found without clipping proves the facet of ``a``, ``b`` positive.
 
     A cheap sufficient test for :func:`facet_positive` (``inside < 0``). A point ``c`` of the
-    bisector plane within ``reach - 5 tol`` of the midpoint ``m`` that lies at least ``4 tol``
-    inside every constraint of ``cand[:ncand]`` (closer to ``a`` than to ``s`` by that distance
-    to their bisector) keeps a disc of radius ``3 tol`` around it in every shrunk half-plane —
-    the distance within the plane is at least the distance in space — so the clipped facet has
-    positive area and reaches the disc of ``reach``. ``c`` starts at ``m`` (a Gabriel edge
+    bisector plane that lies at least ``4 tol`` inside every constraint of ``cand[:ncand]``
+    (closer to ``a`` than to ``s`` by that distance to their bisector), and within ``ρ - 5 tol``
+    of the midpoint ``m`` — ``ρ`` the radius of the reach disc, ``sqrt(reach² - |ab|²/4)``, or
+    the clipping square's ``half`` if smaller — keeps a disc of radius ``3 tol`` around it in
+    every shrunk half-plane (the distance within the plane is at least the distance in space)
+    and in the square, so the clipped facet has positive area and reaches the reach disc. ``c`` starts at ``m`` (a Gabriel edge
     passes at once: about a third of the Delaunay edges of a scan) and is projected, within the
     bisector plane, past each violated constraint for ``WITNESS_ROUNDS`` rounds. False means
     nothing: the clipping decides.
