@@ -144,8 +144,8 @@ def test_facet_witness_accepts_only_positive_facets(kind, reach):
     half, tol = voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D
     edges, _ = voronoi.candidate_edges(X, reach)
     start, cnt, cap, pool, meta = adjacency.from_edges(len(X), edges, slack=0)
-    bufs, lbufs, frame = np.empty((4, cnt.max() + 5)), np.empty((2, cnt.max() + 5), np.int64), \
-        np.empty((3, 3))
+    size = cnt.max() + 5  # clipping scratch, as filter_candidates sizes it
+    bufs, lbufs, frame = np.empty((4, size)), np.empty((2, size), np.int64), np.empty((3, 3))
     clipped, witnessed = set(), set()
     for a in range(len(X)):
         cand = pool[start[a]:start[a] + cnt[a]]

@@ -339,6 +339,7 @@ def _put(a, k, value):
 
 @jit
 def _grow_all(tets, nbr, alive, stamp, seen, free):
+    """The tetrahedron arrays at twice their length (new slots: no neighbours, not alive)."""
     m = tets.shape[0]
     t2 = np.empty((2 * m, 4), dtype=np.int32)
     t2[:m] = tets

@@ -178,10 +178,10 @@ def facet_witness(X, a, b, cand, ncand, half, tol, reach):
     of the midpoint ``m`` — ``ρ`` the radius of the reach disc, ``sqrt(reach² - |ab|²/4)``, or
     the clipping square's ``half`` if smaller — keeps a disc of radius ``3 tol`` around it in
     every shrunk half-plane (the distance within the plane is at least the distance in space)
-    and in the square, so the clipped facet has positive area and reaches the reach disc. ``c`` starts at ``m`` (a Gabriel edge
-    passes at once: about a third of the Delaunay edges of a scan) and is projected, within the
-    bisector plane, past each violated constraint for ``WITNESS_ROUNDS`` rounds. False means
-    nothing: the clipping decides.
+    and in the square, so the clipped facet has positive area and reaches the reach disc.
+    ``c`` starts at ``m`` (a Gabriel edge passes at once: about a third of the Delaunay edges
+    of a scan) and is projected, within the bisector plane, past each violated constraint for
+    ``WITNESS_ROUNDS`` rounds. False means nothing: the clipping decides.
     """
     ax, ay, az = X[a, 0], X[a, 1], X[a, 2]
     mx, my, mz = 0.5 * (X[b, 0] - ax), 0.5 * (X[b, 1] - ay), 0.5 * (X[b, 2] - az)
