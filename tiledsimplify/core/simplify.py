@@ -23,7 +23,7 @@ from .importance import MEASURES, all_importance, coverage_weight
 from .local_mesh import MAX_DN, all_local_meshes
 from .normals import all_normals
 from .options import SimplifyOptions
-from .refine import refine_coverage
+from .refine import protected, refine_coverage
 from .removal import GUARDS, remove_points
 from .result import SimplifyResult, resolve_target
 from .voronoi import BOX_FACTOR, TOL_FACTOR, scale_of, voronoi_neighbours
@@ -410,7 +410,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     importance = np.full(n, np.nan)
     importance[order[:cut]] = order_importance[:cut]
     if options.refines and cut == n_remove and to_target > 0:
-        fixed_u = boundary_u | frozen[rep] | (deviation_u > threshold)
+        fixed_u = boundary_u | frozen[rep] | protected(deviation_u, threshold)
         keep_u, info = refine_coverage(Xu, keep[rep], fixed_u, tie=tie)
         rank, importance = _swap(keep, rank, importance, rep, keep_u, order, order_importance,
                                  cut)

@@ -13,7 +13,8 @@ refines after the global cut, one task per tile, in two stages:
    of earlier phases refined it and the rest as the cut left it, and runs ``refine_coverage``
    on core ∪ halo: only core points are added or removed (each tile keeps its count, so the
    global count stays exact), only core points count in its Hausdorff distance and are
-   filled for, kept halo points and the core's boundary and edge-candidate points stay, and
+   filled for, kept halo points and the core's boundary and protected points stay
+   (:func:`~tiledsimplify.core.refine.protected`), and
    removed halo points are *watched*: a round at level ``τ`` leaves none farther than
    ``max(τ, its distance before)``.
 

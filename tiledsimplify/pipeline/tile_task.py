@@ -14,6 +14,7 @@ import warnings
 import numpy as np
 
 from ..core import SimplifyOptions, simplify_points
+from ..core.refine import protected
 from ..core.simplify import Neighbourhoods, neighbourhood_state
 from ..errors import BudgetWarning, InputError
 from ..tiles import TileStore
@@ -137,8 +138,9 @@ def simplify_tile(store_path, tile, options, threshold, depth):
     sequence, -1 if not reached), ``importance`` (at removal, NaN if not reached; with a
     simplified halo, the running maximum over the whole tile's sequence at that removal — the
     level the global cut compares, and a prefix of it is known exactly when the run stops at a
-    level), ``boundary``, ``candidate`` (boundary measure above the threshold: an edge
-    candidate, which the gap refinement keeps where the cut does), ``normal``; the
+    level), ``boundary``, ``candidate`` (boundary measure above
+    :data:`~tiledsimplify.core.refine.PROTECT` times the threshold, :func:`.refine.protected`:
+    a point the gap refinement keeps where the cut does), ``normal``; the
     result attributes ``exhausted``, ``steps`` and ``depth`` tell the global cut how far the
     sequence is known.
     """
@@ -189,7 +191,7 @@ def simplify_tile(store_path, tile, options, threshold, depth):
         step[res.order[core]] = np.arange(n_steps)
         imp[res.order[core]] = at[core]
         boundary = res.boundary[:n_core]
-        candidate = res.deviation[:n_core] > res.threshold
+        candidate = protected(res.deviation[:n_core], res.threshold)
         normal = res.normals[:n_core].astype(np.float32)
     store.write_result(tile, {"step": step, "importance": imp, "boundary": boundary,
                               "candidate": candidate, "normal": normal}, overwrite=True,
