@@ -91,9 +91,9 @@ class SimplifyOptions:
         After the greedy removal reaches the target, swap kept points for removed ones at equal
         count while that lowers the Hausdorff distance from the input to the kept set
         (:mod:`tiledsimplify.core.refine`); boundary, frozen and kept points whose boundary
-        measure is above ``refine.PROTECT`` (3) times the threshold are never swapped out. Only the kept set at the
-        requested count is refined: ``order`` and :meth:`SimplifyResult.keep_at` stay the
-        greedy's. None: the mode's default (``"coverage"``: True; ``"paper"``: False). Not
+        measure is above ``refine.PROTECT`` (3) times the threshold are never swapped out.
+        Only the kept set at the requested count is refined: ``order`` and
+        :meth:`SimplifyResult.keep_at` stay the greedy's. None: the mode's default (``"coverage"``: True; ``"paper"``: False). Not
         applied with a guard, whose veto the swaps would not respect.
     """
 

@@ -149,8 +149,8 @@ def refine_tile(store_path, tile, hausdorff, earlier=()):
     info = {"swaps": 0, "hausdorff_before": 0.0, "hausdorff_after": 0.0}
     fixed = np.ones(len(xyz), dtype=bool)
     fixed[:n_core] = store.read_result(tile, "boundary")
-    if "candidate" in store.result_names(tile):
-        fixed[:n_core] |= store.read_result(tile, "candidate")
+    if "protected" in store.result_names(tile):
+        fixed[:n_core] |= store.read_result(tile, "protected")
     core_keep = keep[:n_core]
     if n_core:
         addable = np.zeros(len(xyz), dtype=bool)

@@ -138,9 +138,10 @@ def simplify_tile(store_path, tile, options, threshold, depth):
     sequence, -1 if not reached), ``importance`` (at removal, NaN if not reached; with a
     simplified halo, the running maximum over the whole tile's sequence at that removal — the
     level the global cut compares, and a prefix of it is known exactly when the run stops at a
-    level), ``boundary``, ``candidate`` (boundary measure above
-    :data:`~tiledsimplify.core.refine.PROTECT` times the threshold, :func:`.refine.protected`:
-    a point the gap refinement keeps where the cut does), ``normal``; the
+    level), ``boundary``, ``protected`` (boundary measure above
+    :data:`~tiledsimplify.core.refine.PROTECT` times the threshold,
+    :func:`~tiledsimplify.core.refine.protected`: a point the gap refinement keeps where the cut
+    does), ``normal``; the
     result attributes ``exhausted``, ``steps`` and ``depth`` tell the global cut how far the
     sequence is known.
     """
@@ -150,7 +151,7 @@ def simplify_tile(store_path, tile, options, threshold, depth):
     step = np.full(n_core, -1, dtype=np.int64)
     imp = np.full(n_core, np.nan)
     boundary = np.zeros(n_core, dtype=bool)
-    candidate = np.zeros(n_core, dtype=bool)
+    protect = np.zeros(n_core, dtype=bool)
     normal = np.zeros((n_core, 3), dtype=np.float32)
     kind, value = depth
     _ignore_tile_budget_warnings()
@@ -191,10 +192,10 @@ def simplify_tile(store_path, tile, options, threshold, depth):
         step[res.order[core]] = np.arange(n_steps)
         imp[res.order[core]] = at[core]
         boundary = res.boundary[:n_core]
-        candidate = protected(res.deviation[:n_core], res.threshold)
+        protect = protected(res.deviation[:n_core], res.threshold)
         normal = res.normals[:n_core].astype(np.float32)
     store.write_result(tile, {"step": step, "importance": imp, "boundary": boundary,
-                              "candidate": candidate, "normal": normal}, overwrite=True,
+                              "protected": protect, "normal": normal}, overwrite=True,
                        attrs={"exhausted": bool(exhausted), "steps": n_steps,
                               "known_level": known_level,
                               "depth": [kind, float(value)]})
