@@ -93,8 +93,9 @@ class SimplifyOptions:
         (:mod:`tiledsimplify.core.refine`); boundary, frozen and kept points whose boundary
         measure is above ``refine.PROTECT`` (3) times the threshold are never swapped out.
         Only the kept set at the requested count is refined: ``order`` and
-        :meth:`SimplifyResult.keep_at` stay the greedy's. None: the mode's default (``"coverage"``: True; ``"paper"``: False). Not
-        applied with a guard, whose veto the swaps would not respect.
+        :meth:`SimplifyResult.keep_at` stay the greedy's. None: the mode's default
+        (``"coverage"``: True; ``"paper"``: False). Not applied with a guard, whose veto the
+        swaps would not respect.
     """
 
     mode: str = "coverage"

@@ -47,12 +47,12 @@ from ._jit import jit
 #: swapped out, besides boundary and frozen points (:func:`protected`). Edge candidates just
 #: above the threshold are mostly rows beside a flagged edge or noise on a scan; swapping them
 #: for fills lowers the Hausdorff distance. Measured on the 38 quality cases
-#: (``benchmarks/quality.py``; geometric mean against protecting every candidate, 1x): 3x —
-#: Hausdorff -3.5 % (lower on 38 of 38), Chamfer -2.0 %, mean surface error +0.3 %, edge
-#: coverage -0.2 %; within 1.2x of the best peer's Hausdorff on 32 cases against 27, best edge
-#: coverage on 26 against 25, lowest mean error on 31 as before. No protection: Hausdorff
-#: -6.2 %, but mean error +1.3 % (Autzen 3.15 -> 3.34, above CGAL's 3.23) and coverage -2.5 %
-#: (counter scan 0.417 -> 0.353); 4x: between the two.
+#: (``benchmarks/quality.py``, with ``edge_fit.MAX_RMS`` still 0.4; geometric mean against
+#: protecting every candidate, 1x): 3x — Hausdorff -3.5 % (lower on 38 of 38), Chamfer -2.0 %,
+#: mean surface error +0.3 %, edge coverage -0.2 %; within 1.2x of the best peer's Hausdorff
+#: on 32 cases against 27, best edge coverage on 26 against 25, lowest mean error on 31 as
+#: before. No protection: Hausdorff -6.2 %, but mean error +1.3 % (Autzen 3.15 -> 3.34, above
+#: CGAL's 3.23) and coverage -2.5 % (counter scan 0.417 -> 0.353); 4x: between the two.
 PROTECT = 3.0
 
 
