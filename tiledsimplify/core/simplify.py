@@ -27,6 +27,7 @@ from .refine import protected, refine_coverage
 from .removal import GUARDS, remove_points
 from .result import SimplifyResult, resolve_target
 from .voronoi import BOX_FACTOR, TOL_FACTOR, scale_of, voronoi_neighbours
+from .zorder import zorder
 
 
 def _validate(xyz, frozen):
@@ -226,11 +227,17 @@ def _swap(keep, rank, importance, rep, keep_u, order, order_importance, cut):
 
 def _prepare(X, frozen):
     """Distinct points, centred: ``(rep, inverse, Xu, D)`` — the representatives of the
-    duplicate groups, the group of every input point, their centred coordinates (what every
-    step runs on) and the cloud's scale."""
+    duplicate groups along the Z-order curve (:mod:`.zorder`: neighbours close in memory), the
+    group of every input point, their centred coordinates (what every step runs on) and the
+    cloud's scale."""
     n = X.shape[0]
     rep, inverse = _deduplicate(X, frozen) if n else (np.empty(0, np.int64), np.empty(0, np.int64))
     m = rep.size
+    along = zorder(X[rep])
+    rep = rep[along]
+    group = np.empty(m, dtype=np.int64)
+    group[along] = np.arange(m)
+    inverse = group[inverse]
     lo = X[rep].min(axis=0) if m else np.zeros(3)
     hi = X[rep].max(axis=0) if m else np.zeros(3)
     Xu = np.ascontiguousarray(X[rep] - 0.5 * (lo + hi))
