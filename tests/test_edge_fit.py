@@ -169,9 +169,11 @@ def test_boundary_found_on_a_noisy_line_scan(data_dir, noise):
 
 
 def _naive_borrow(X, dn, dn_cnt, candidate, distance, angle, line, local, width):
-    """Step 3 by Python loops: each failed candidate's two-ring, lenders, numpy distances."""
+    """Step 3 by Python loops: the two-ring of each candidate its own fit does not flag,
+    lenders, numpy distances."""
     out, angle_out = distance.copy(), angle.copy()
-    for p in np.flatnonzero(candidate & ~np.isfinite(distance)):
+    own = edge_fit.band(distance, angle, width)
+    for p in np.flatnonzero(candidate & ~own):
         one = set(dn[p, :dn_cnt[p]].tolist())
         two = set(one)
         for q in one:
@@ -209,7 +211,11 @@ def test_borrow_equals_a_naive_search(data_dir):
         np.testing.assert_array_equal(out_angle, ref_angle)
         lent = cand & ~fitted & np.isfinite(out)
         assert lent.sum() > 20  # the scan has failed fits beside good ones
-        assert (out[fitted] == dist[fitted]).all()
+        refit = fitted & (out < dist)  # fits that found a farther edge than a neighbour's
+        assert refit.sum() > 5
+        assert (out <= dist).all()
+        own = edge_fit.band(dist, ang, width)
+        assert (out[own] == dist[own]).all()  # flagged by their own fit: left alone
 
 
 @pytest.mark.parametrize("noise", [0.0, 0.1])

@@ -23,8 +23,9 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    flagged only when it lies within ``width`` local spacings of that line (local spacing: the
    median nearest-neighbour distance over the two-ring) — ``SOFT_WIDTH`` of that where the
    planes meet at less than ``SOFT_ANGLE`` (:func:`band`).
-3. **Borrowed edges** — a candidate whose own fit fails is located by the line of a flagged
-   neighbour on a sharp edge (:func:`borrow`).
+3. **Borrowed edges** — a candidate that its own fit does not flag (the fit failed, or found
+   another, farther edge) is located by the line of a flagged neighbour on a sharp edge
+   (:func:`borrow`).
 
 So flags are the points "on or within about one spacing of a sharp edge" — the ground truth of
 DESIGN.md §4 — whatever the noise and the scan-line anisotropy.
@@ -443,14 +444,16 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local):
 
 @jit
 def borrow(X, dn, dn_cnt, distance, angle, line, local, width, out, angle_out):
-    """Step 3: candidates whose own fit failed take the edge of a flagged sharp neighbour.
+    """Step 3: candidates that their own fit does not flag take the edge of a flagged sharp
+    neighbour.
 
-    ``out[p]``, ``angle_out[p]``: for a candidate with no fit of its own (``distance`` inf;
-    candidates are the points with a positive ``local`` spacing, :func:`localise`), the
-    distance in its local spacings to the nearest fitted line (``line``) among the points of
-    its two-ring that lie within ``width`` of their own line on an edge of ``SOFT_ANGLE`` or
-    more, and that line's angle — if within ``BORROW_WIDTH * width``, else inf; every other
-    point keeps ``distance`` and ``angle``.
+    ``out[p]``, ``angle_out[p]``: for a candidate (a point with a positive ``local`` spacing,
+    :func:`localise`) outside its own band (:func:`band`: no fit, or a fitted line farther
+    than ``width``, ``SOFT_WIDTH * width`` for a soft edge), the distance in its local spacings
+    to the nearest fitted line (``line``) among the points of its two-ring that lie within
+    ``width`` of their own line on an edge of ``SOFT_ANGLE`` or more, and that line's angle —
+    if within ``BORROW_WIDTH * width`` and nearer than its own line; every other point keeps
+    ``distance`` and ``angle``.
 
     Beyond the paper. Right on a scanned edge a two-ring can split into two planes badly (three
     to five one-ring neighbours on anisotropic scan lines, a seed across the noise) while the
@@ -462,6 +465,22 @@ def borrow(X, dn, dn_cnt, distance, angle, line, local, width, out, angle_out):
     0.902, now above every peer); Hausdorff +1.9 % (more flags, less budget for the faces).
     Only sharp edges lend: borrowed crease flags cost the Bunny its mean-error lead (17.50
     with, 17.17 without the angle rule, at full width; 17.00 now, best peer 17.27).
+
+    A fit that succeeds can find the wrong edge too: a two-plane fit finds one edge per
+    two-ring, and where two edges are closer than that (a step a few spacings high, a chamfer
+    or fillet narrower than the spacing — ADIS16480's edges are 0.1-0.2 spacings from the
+    next, octagonal_pocket's 0.55 — a thread) it finds the dominant one and misses the nearer.
+    So fitted candidates outside their own band borrow as well. Measured on the 37 quality
+    cases against borrowing for failed fits only (``benchmarks/quality.py``, coverage mode):
+    boundary F1 up on 34 (median 0.713 -> 0.722 even, 0.507 -> 0.525 scans; F1 >= 0.85 on 4
+    even parts, not 2: angle_block 0.852, octagonal_pocket 0.854), mean surface error lower on
+    27 (geometric mean -0.8 %; Fandisk scan 8.30 -> 8.07, counter scan 11.01 -> 10.51), edge
+    coverage up on 30 (+0.9 %); Hausdorff +1.2 % (higher on 34). Where the flags already take
+    most of the budget it costs: featuretype mean 21.7 -> 24.2 and Hausdorff 1.60 -> 1.73x the
+    best peer's, octagonal_pocket 29.6 -> 32.1 and 1.71 -> 1.89x; below every peer's mean
+    error on 31 cases, not 32 (cycloidal 44.54 against 44.45), Hausdorff within 1.2x on 30, not
+    31 (tray_bottom scan 1.20x). Borrowing within 0.7 widths instead: F1 median 0.730 / 0.544,
+    but Hausdorff +3.2 %, mean error best on 29.
     """
     n = X.shape[0]
     mark = np.zeros(n, dtype=np.int64)
@@ -469,8 +488,9 @@ def borrow(X, dn, dn_cnt, distance, angle, line, local, width, out, angle_out):
     for p in range(n):
         out[p] = distance[p]
         angle_out[p] = angle[p]
-        if distance[p] < np.inf or local[p] <= 0.0:
-            continue
+        if local[p] <= 0.0 or distance[p] <= width * (SOFT_WIDTH if angle[p] < SOFT_ANGLE
+                                                       else 1.0):
+            continue  # not a candidate, or flagged by its own fit
         c = gather_rings(p, dn, dn_cnt, FIT_RINGS, mark, ring)
         for j in range(c):
             q = ring[j]
