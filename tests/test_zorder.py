@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tiledsimplify import SimplifyOptions, simplify_points, synthetic
-from tiledsimplify.core.zorder import BITS, zorder
+from tiledsimplify.core.zorder import BITS, distinct, zorder
 from tiledsimplify.io import read_mesh
 
 
@@ -56,6 +56,48 @@ def test_zorder_is_consistent_across_subsets(name, X):
         sub = rng.random(len(X)) < 0.3
         ids = np.flatnonzero(sub)
         np.testing.assert_array_equal(ids[zorder(X[sub])], whole[sub[whole]])
+
+
+def naive_distinct(X, frozen):
+    """Exact-duplicate groups by numpy.unique over rows (x-y-z order), each represented by a
+    frozen member if any, else the lowest index; then the groups put in Z-order."""
+    _, inverse = np.unique(X, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    rep = []
+    for g in range(inverse.max() + 1):
+        members = np.flatnonzero(inverse == g)
+        held = members[frozen[members]]
+        rep.append(held[0] if held.size else members[0])
+    rep = np.array(rep, dtype=np.int64)
+    along = zorder(X[rep])
+    group = np.empty(rep.size, dtype=np.int64)
+    group[along] = np.arange(rep.size)
+    return rep[along], group[inverse]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_distinct_groups_duplicates_in_zorder(seed):
+    rng = np.random.default_rng(seed)
+    n = 800
+    # few decimals: exact duplicates; far from the origin: long runs of equal top bits
+    X = np.round(rng.normal(size=(n, 3)), seed % 3)
+    if seed % 2:
+        X = X * 1e-3 + [635_000.0, 4_800_000.0, 120.0]
+    X[rng.random((n, 3)) < 0.05] = -0.0  # -0.0 == +0.0: the same point
+    X = np.r_[X, X[rng.integers(0, n, 200)]]
+    frozen = rng.random(len(X)) < 0.2
+    rep, inverse = distinct(X, frozen)
+    ref_rep, ref_inverse = naive_distinct(X, frozen)
+    np.testing.assert_array_equal(rep, ref_rep)
+    np.testing.assert_array_equal(inverse, ref_inverse)
+    np.testing.assert_array_equal(X[rep][inverse], X)
+
+
+def test_distinct_of_no_point_and_one_point():
+    rep, inverse = distinct(np.empty((0, 3)), np.empty(0, dtype=bool))
+    assert rep.size == 0 and inverse.size == 0
+    rep, inverse = distinct(np.ones((3, 3)), np.array([False, True, False]))
+    assert rep.tolist() == [1] and inverse.tolist() == [0, 0, 0]
 
 
 def test_zorder_keeps_neighbours_close_in_memory():

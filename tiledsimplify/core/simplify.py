@@ -27,7 +27,7 @@ from .refine import protected, refine_coverage
 from .removal import GUARDS, remove_points
 from .result import SimplifyResult, resolve_target
 from .voronoi import BOX_FACTOR, TOL_FACTOR, scale_of, voronoi_neighbours
-from .zorder import zorder
+from .zorder import distinct
 
 
 def _validate(xyz, frozen):
@@ -53,19 +53,6 @@ def _validate(xyz, frozen):
                              f"{F.dtype} and shape {F.shape}.")
         F = F.copy()
     return X, F
-
-
-def _deduplicate(X, frozen):
-    """Group exact duplicates; each group's representative is a frozen member if any, else
-    the lowest index. Returns ``(rep, inverse)``: representative ids, and the group of each."""
-    _, inverse = np.unique(X, axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    idx = np.arange(X.shape[0])
-    order = np.lexsort((idx, ~frozen, inverse))
-    first = np.ones(order.size, dtype=bool)
-    first[1:] = inverse[order[1:]] != inverse[order[:-1]]
-    rep = order[first]  # sorted by group id
-    return rep, inverse
 
 
 @dataclass
@@ -227,17 +214,11 @@ def _swap(keep, rank, importance, rep, keep_u, order, order_importance, cut):
 
 def _prepare(X, frozen):
     """Distinct points, centred: ``(rep, inverse, Xu, D)`` — the representatives of the
-    duplicate groups along the Z-order curve (:mod:`.zorder`: neighbours close in memory), the
-    group of every input point, their centred coordinates (what every step runs on) and the
-    cloud's scale."""
-    n = X.shape[0]
-    rep, inverse = _deduplicate(X, frozen) if n else (np.empty(0, np.int64), np.empty(0, np.int64))
+    exact-duplicate groups (a frozen member if any, else the lowest index) along the Z-order
+    curve (:func:`.zorder.distinct`: neighbours close in memory), the group of every input
+    point, their centred coordinates (what every step runs on) and the cloud's scale."""
+    rep, inverse = distinct(X, frozen)
     m = rep.size
-    along = zorder(X[rep])
-    rep = rep[along]
-    group = np.empty(m, dtype=np.int64)
-    group[along] = np.arange(m)
-    inverse = group[inverse]
     lo = X[rep].min(axis=0) if m else np.zeros(3)
     hi = X[rep].max(axis=0) if m else np.zeros(3)
     Xu = np.ascontiguousarray(X[rep] - 0.5 * (lo + hi))
