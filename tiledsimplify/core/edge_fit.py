@@ -479,7 +479,7 @@ def borrow(X, dn, dn_cnt, distance, angle, line, local, width, out, angle_out):
     most of the budget it costs: featuretype mean 21.7 -> 24.2 and Hausdorff 1.60 -> 1.73x the
     best peer's, octagonal_pocket 29.6 -> 32.1 and 1.71 -> 1.89x; below every peer's mean
     error on 31 cases, not 32 (cycloidal 44.54 against 44.45), Hausdorff within 1.2x on 30, not
-    31 (tray_bottom scan 1.20x). Borrowing within 0.7 widths instead: F1 median 0.730 / 0.544,
+    31 (tray_bottom scan 1.205x). Borrowing within 0.7 widths instead: F1 median 0.730 / 0.544,
     but Hausdorff +3.2 %, mean error best on 29.
     """
     n = X.shape[0]

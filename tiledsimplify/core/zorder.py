@@ -2,9 +2,9 @@
 
 Beyond the paper: where each point sits in memory, not what is computed. Every stage of the
 core visits a point's neighbours: the local meshes, the facet tests and heap updates of the
-removal loop, the boundary fits, the gap refinement. In the lexicographic (x, y, z) order that
-:func:`numpy.unique` leaves the distinct points in, the neighbours of a point lie a whole
-x-slab of the cloud apart in every array, and the larger the cloud the more of those visits
+removal loop, the boundary fits, the gap refinement. In lexicographic (x, y, z) order — the
+order :func:`numpy.unique` over rows gives, the core's order before — the neighbours of a
+point lie a whole x-slab of the cloud apart in every array, and the larger the cloud the more of those visits
 miss the cache. Along a Z-order curve they are mostly a few entries apart.
 
 The key is **consistent across subsets**: it is made from each coordinate's own bits (an
@@ -12,7 +12,9 @@ order-preserving map of float64 to uint64, the top ``BITS`` bits of x, y and z i
 not from a bounding box, so two points are in the same relative order in any subset of the
 cloud that holds both — a tile orders its points as the whole cloud does, as the lexicographic
 order did. Points whose keys tie (equal in the top ``BITS`` bits of every coordinate: within
-about 1e-9 of each other, relative to their magnitude) keep the order they came in.
+about 1e-9 of each other, relative to their magnitude) keep the order they came in
+(:func:`zorder`) or go in (x, y, z) order (:func:`distinct`, which also groups exact
+duplicates).
 
 Results depend on the order only through rounding: sums over a point's neighbours (Eq. (1),
 the fits) run in index order. Against the lexicographic order: the same kept points on 100k
