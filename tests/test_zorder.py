@@ -5,6 +5,7 @@ import struct
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from tiledsimplify import SimplifyOptions, simplify_points, synthetic
 from tiledsimplify.core.zorder import BITS, distinct, zorder
@@ -106,7 +107,6 @@ def test_zorder_keeps_neighbours_close_in_memory():
     g = g[(g[:, 2] == 0) | (g[:, 0] == 0)] + 1.0  # two faces of a cube
     pos = np.empty(len(g), dtype=np.int64)
     pos[zorder(g)] = np.arange(len(g))
-    from scipy.spatial import cKDTree
     _, nb = cKDTree(g).query(g, k=5)
     z_gap = np.median(np.abs(pos[nb[:, 1:]] - pos[:, None]))
     lex = np.empty(len(g), dtype=np.int64)
