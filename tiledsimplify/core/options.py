@@ -50,7 +50,7 @@ class SimplifyOptions:
     edge_width : float
         ``"coverage"``: flag candidates within this many local spacings of the fitted edge
         (0.7 of it beside edges whose faces meet at less than 60°, :func:`.edge_fit.band`;
-        0.5 of it from a neighbour's edge where a candidate's own fit fails,
+        0.5 of it from a neighbour's edge where a candidate's own fit does not flag it,
         :func:`.edge_fit.borrow`).
     coverage : float
         Strength of the coverage term: the importance is Eq. (1) + ``coverage / (3 · spacing)

@@ -149,9 +149,9 @@ def boundary_flags(Xu, st, options):
 
     ``"paper"``: the one-ring measure with the automatic threshold (§3.1). ``"coverage"``: the
     two-ring measure, candidates above the threshold, then only those within
-    ``options.edge_width`` local spacings of a fitted edge line — their own or, where their
-    fit fails, a flagged neighbour's (:func:`.edge_fit.borrow`) — less beside a soft edge
-    (:func:`.edge_fit.band`).
+    ``options.edge_width`` local spacings of a fitted edge line — their own or, where that
+    does not flag them (no fit, or a farther edge), a flagged neighbour's
+    (:func:`.edge_fit.borrow`) — less beside a soft edge (:func:`.edge_fit.band`).
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
