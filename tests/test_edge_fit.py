@@ -204,7 +204,8 @@ def test_borrow_equals_a_naive_search(data_dir):
     np.testing.assert_allclose(np.linalg.norm(line[fitted, 3:], axis=1), 1.0, atol=1e-12)
     for width in (1.0, 0.5):
         out, out_angle = np.empty(n), np.empty(n)
-        edge_fit.borrow(X, st.dn, st.dn_cnt, dist, ang, line, local, width, out, out_angle)
+        edge_fit.borrow(X, st.dn, st.dn_cnt, dist, ang, line, local, width,
+                        edge_fit.band(dist, ang, width), out, out_angle)
         ref, ref_angle = _naive_borrow(X, st.dn, st.dn_cnt, cand, dist, ang, line, local,
                                        width)
         np.testing.assert_allclose(out, ref, rtol=1e-12)

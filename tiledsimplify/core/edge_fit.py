@@ -443,13 +443,14 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local):
 
 
 @jit
-def borrow(X, dn, dn_cnt, distance, angle, line, local, width, out, angle_out):
+def borrow(X, dn, dn_cnt, distance, angle, line, local, width, flagged, out, angle_out):
     """Step 3: candidates that their own fit does not flag take the edge of a flagged sharp
     neighbour.
 
     ``out[p]``, ``angle_out[p]``: for a candidate (a point with a positive ``local`` spacing,
-    :func:`localise`) outside its own band (:func:`band`: no fit, or a fitted line farther
-    than ``width``, ``SOFT_WIDTH * width`` for a soft edge), the distance in its local spacings
+    :func:`localise`) that its own fit does not flag (``flagged``: :func:`band` of
+    ``distance``, ``angle`` and ``width`` — no fit, or a fitted line farther than the band),
+    the distance in its local spacings
     to the nearest fitted line (``line``) among the points of its two-ring that lie within
     ``width`` of their own line on an edge of ``SOFT_ANGLE`` or more, and that line's angle —
     if within ``BORROW_WIDTH * width`` and nearer than its own line; every other point keeps
@@ -488,8 +489,7 @@ def borrow(X, dn, dn_cnt, distance, angle, line, local, width, out, angle_out):
     for p in range(n):
         out[p] = distance[p]
         angle_out[p] = angle[p]
-        if local[p] <= 0.0 or distance[p] <= width * (SOFT_WIDTH if angle[p] < SOFT_ANGLE
-                                                       else 1.0):
+        if local[p] <= 0.0 or flagged[p]:
             continue  # not a candidate, or flagged by its own fit
         c = gather_rings(p, dn, dn_cnt, FIT_RINGS, mark, ring)
         for j in range(c):

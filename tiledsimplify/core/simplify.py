@@ -175,8 +175,8 @@ def boundary_flags(Xu, st, options):
     edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, fitted,
                       fitted_angle, line, local)
     distance, angle = np.empty(m), np.empty(m)
-    edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local,
-                    options.edge_width, distance, angle)
+    edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, options.edge_width,
+                    edge_fit.band(fitted, fitted_angle, options.edge_width), distance, angle)
     return deviation, edge_fit.band(distance, angle, options.edge_width), threshold
 
 
@@ -219,9 +219,10 @@ def _prepare(X, frozen):
     point, their centred coordinates (what every step runs on) and the cloud's scale."""
     rep, inverse = distinct(X, frozen)
     m = rep.size
-    lo = X[rep].min(axis=0) if m else np.zeros(3)
-    hi = X[rep].max(axis=0) if m else np.zeros(3)
-    Xu = np.ascontiguousarray(X[rep] - 0.5 * (lo + hi))
+    P = X[rep]
+    lo = P.min(axis=0) if m else np.zeros(3)
+    hi = P.max(axis=0) if m else np.zeros(3)
+    Xu = np.ascontiguousarray(P - 0.5 * (lo + hi))
     return rep, inverse, Xu, scale_of(Xu)
 
 
