@@ -55,14 +55,41 @@ def test_fitted_edge_distance_is_the_true_distance_near_a_ridge():
     assert not (est[inner & (true > 3)] <= 1.5).any()
 
 
-@pytest.mark.parametrize("opening, turn", [(90.0, 90.0), (130.0, 50.0)])
-def test_fitted_angle_is_the_angle_between_the_faces(opening, turn):
-    X = _roof(np.random.default_rng(4), 4000, angle_deg=opening)
-    est, _, angle = _localise_all(X)
+@pytest.mark.parametrize("opening, turn", [(90.0, 90.0), (130.0, 50.0), (50.0, 130.0)])
+def test_fitted_angle_is_the_fold_between_the_faces(opening, turn):
+    # a wedge (faces meeting at 50°) folds by more than 90°; its planes meet at 50°, which would
+    # read as a soft edge
+    X = _roof(np.random.default_rng(4), 8000, angle_deg=opening)
+    est, nn, angle = _localise_all(X)
     near = np.isfinite(est) & (est < 1.5) & (np.abs(X[:, 1]) < 0.8)
     assert near.sum() > 50
     assert abs(np.median(angle[near]) - turn) < 3.0
     assert (angle[~np.isfinite(est)] == 0.0).all()
+    # and the distance is right at the wedge too: |x| / sin(opening / 2) along the face
+    true = np.abs(X[:, 0]) / np.sin(np.deg2rad(opening / 2.0)) / np.median(nn)
+    assert np.median(np.abs(est[near] - true[near])) < 0.2
+
+
+@pytest.mark.parametrize("start, found", [(0.25, True), (1.0, False)])
+def test_a_wedge_needs_points_at_its_line(start, found):
+    # two faces opening 50° from the line x = z = 0, sampled from ``start`` outwards (spacing
+    # 0.5): a wedge's faces start at its line; where the nearest point is more than a spacing
+    # away (as for two halves of a noisy face whose planes meet far off) there is no edge
+    t, y = np.meshgrid(start + 0.5 * np.arange(6), 0.5 * np.arange(-4, 5))
+    t, y = t.ravel(), y.ravel()
+    a = np.deg2rad(50.0)
+    X = np.vstack([np.c_[t, y, 0 * t], np.c_[t * np.cos(a), y, t * np.sin(a)]])
+    c = len(X)
+    idx = np.arange(c)
+    side = np.repeat([0, 1], c // 2)
+    line = np.empty(6)
+    d, fold = edge_fit._fit_edge(X, idx, c, side, np.empty(3), np.empty(3), np.empty(3),
+                                 np.empty(3), np.empty(3), 0.5, line)
+    if found:
+        assert fold == pytest.approx(130.0, abs=1e-6)
+        assert d == pytest.approx(start, rel=1e-6)  # X[0] = (start, -2, 0), the line is the y axis
+    else:
+        assert d == np.inf and fold == 0.0
 
 
 def test_band_is_narrower_beside_a_soft_edge():

@@ -18,11 +18,12 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    the k-means in a wrong split; when the fit fails, it is tried once more from a **line
    sweep**: the split of the neighbours by a straight line in their mean plane (``NDIR``
    directions, every offset) with the least total squared distance to the two planes, which
-   is where a sharp edge projects. If the planes meet at more than ``MIN_ANGLE`` and each has
-   at least ``MIN_SIDE`` points, the edge is their line of intersection and the candidate is
-   flagged only when it lies within ``width`` local spacings of that line (local spacing: the
-   median nearest-neighbour distance over the two-ring) — ``SOFT_WIDTH`` of that where the
-   planes meet at less than ``SOFT_ANGLE`` (:func:`band`).
+   is where a sharp edge projects. If the faces fold by more than ``MIN_ANGLE`` (a wedge's
+   fold is more than 90°: its faces meet at less than 90°) and each has at least ``MIN_SIDE``
+   points, the edge is the planes' line of intersection and the candidate is flagged only
+   when it lies within ``width`` local spacings of that line (local spacing: the median
+   nearest-neighbour distance over the two-ring) — ``SOFT_WIDTH`` of that where the faces
+   fold by less than ``SOFT_ANGLE`` (:func:`band`).
 3. **Borrowed edges** — a candidate that its own fit does not flag (the fit failed, or found
    another, farther edge) is located by the line of a flagged neighbour on a sharp edge
    (:func:`borrow`).
@@ -42,9 +43,14 @@ from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covarian
 CANDIDATE = 0.08
 #: default: flag candidates within this many local spacings of the fitted edge
 WIDTH = 1.0
-#: planes meeting at less than this angle (degrees) are not a sharp edge (truth: > 30°)
+#: planes meeting at less than this angle (degrees) give no sharp edge (truth: > 30°). At an
+#: ordinary edge that angle is the faces' **fold** (the angle between their outward normals:
+#: 180° less the angle between the two half-planes); a wedge, whose faces meet at less than
+#: 90°, folds by 180° less it. The fold is what :func:`band` and :func:`borrow` see (a 50°
+#: wedge folds by 130°: sharp, not soft; :func:`_fit_edge`); wedges of less than this angle
+#: are not found
 MIN_ANGLE = 45.0
-#: edges whose planes meet at less than this angle (degrees) are **soft**: flagged only within
+#: edges whose faces fold by less than this angle (degrees) are **soft**: flagged only within
 #: ``SOFT_WIDTH`` times the band width (see :func:`band`)
 SOFT_ANGLE = 60.0
 #: band width of soft edges, as a fraction of the ``width`` of sharper ones
@@ -273,7 +279,7 @@ def _project(X, idx, c, p, t1, t2, angle, proj):
 @jit
 def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing, proj, line):
     """Step 2: ``(distance, angle)`` — the distance from ``idx[0]`` to the edge of a two-plane
-    fit of ``idx[:c]`` and the angle between the two planes (degrees, 0-90).
+    fit of ``idx[:c]`` and the faces' fold there (degrees, 0-180, see ``MIN_ANGLE``).
 
     ``normals`` are one-ring normals (sharper across the edge than smoothed ones). The fit
     starts from the normal seeds; if that fails, once more from the line sweep
@@ -324,16 +330,20 @@ def _line_distance(X, p, line):
 @jit
 def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
     """Two-plane k-means from the split ``side``, then ``(distance, angle)``: the distance from
-    ``idx[0]`` to the planes' line of intersection and the angle between the planes (degrees,
-    0-90).
+    ``idx[0]`` to the planes' line of intersection and the faces' fold there (degrees, 0-180):
+    180° less the angle between the half-planes the two sides span from the line, each side's
+    direction given by the sign of its points' mean offset from the line. At an ordinary edge
+    this is the angle between the planes; at a wedge (faces meeting at less than 90°) it is
+    more than 90°, where the planes' angle would read a 50° wedge as a 50° fold (a soft edge).
 
     The distance is ``inf`` when the points are not two planes meeting at a sharp edge: a side
     with fewer than ``MIN_SIDE`` points or spread less than ``MIN_SPREAD`` spacings across (a
-    row, not a face), planes within ``MIN_ANGLE`` of parallel, or a side whose RMS distance to its
-    plane exceeds ``MAX_RMS`` spacings (a curved or rough patch, not two faces), or sides that
-    do not lie each on its own side of the line (more than ``MAX_MIXED`` of a side's points
+    row, not a face), planes within ``MIN_ANGLE`` of parallel, a side whose RMS distance to its
+    plane exceeds ``MAX_RMS`` spacings (a curved or rough patch, not two faces), sides that do
+    not lie each on its own side of the line (more than ``MAX_MIXED`` of a side's points
     farther than half a spacing from the line on the wrong side: a noisy surface split in two
-    interleaved halves, not two faces meeting).
+    interleaved halves, not two faces meeting), or a wedge with no point within a spacing of
+    its line (two halves of one noisy face whose planes meet far off, both on one side).
     """
     max_rms = MAX_RMS * spacing
     p = idx[0]
@@ -364,28 +374,43 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
         return np.inf, 0.0
     cs = n1[0] * n2[0] + n1[1] * n2[1] + n1[2] * n2[2]
     if abs(cs) > np.cos(np.deg2rad(MIN_ANGLE)):
-        return np.inf, 0.0
-    # each side on its own side of the line: offsets along t_i = u x n_i, u = n1 x n2
+        return np.inf, 0.0  # the fold is the planes' angle or 180° less it: below MIN_ANGLE
+    # each side on its own side of the line: offsets along t_i = u x n_i, u = n1 x n2; the
+    # sign of a side's mean offset gives the direction d_i from the line into its half-plane
     _edge_line(c1, n1, c2, n2, line)
     lx, ly, lz, ux, uy, uz = line[0], line[1], line[2], line[3], line[4], line[5]
+    d1x = d1y = d1z = 0.0
+    fold = 0.0
+    gap = np.inf  # the least distance of a point from the line (within its plane)
     for which in range(2):
         nx, ny, nz = (n1[0], n1[1], n1[2]) if which == 0 else (n2[0], n2[1], n2[2])
         tx, ty, tz = uy * nz - uz * ny, uz * nx - ux * nz, ux * ny - uy * nx
         tn = np.sqrt(tx * tx + ty * ty + tz * tz)
         pos = 0
         neg = 0
+        total = 0.0
         for j in range(c):
             if side[j] != which:
                 continue
             q = idx[j]
             o = ((X[q, 0] - lx) * tx + (X[q, 1] - ly) * ty + (X[q, 2] - lz) * tz) / tn
+            total += o
+            gap = min(gap, abs(o))
             if o > 0.5 * spacing:
                 pos += 1
             elif o < -0.5 * spacing:
                 neg += 1
         if min(pos, neg) > MAX_MIXED * (pos + neg):
             return np.inf, 0.0
-    return _line_distance(X, p, line), np.rad2deg(np.arccos(min(abs(cs), 1.0)))
+        sign = 1.0 if total >= 0.0 else -1.0
+        if which == 0:
+            d1x, d1y, d1z = sign * tx / tn, sign * ty / tn, sign * tz / tn
+        else:
+            fold = 180.0 - np.rad2deg(np.arccos(max(-1.0, min(
+                sign * (d1x * tx + d1y * ty + d1z * tz) / tn, 1.0))))
+    if fold > 90.0 and gap > spacing:
+        return np.inf, 0.0  # a wedge's faces start at its line; a noisy face's halves do not
+    return _line_distance(X, p, line), fold
 
 
 @jit
@@ -405,7 +430,8 @@ def nearest_distances(X, start, cnt, pool, out):
 @jit
 def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local):
     """Step 2 for every candidate: ``out[p]`` = edge distance / local spacing (inf: no edge),
-    ``angle[p]`` = the angle between the fitted planes (degrees, 0-90; 0 where no edge),
+    ``angle[p]`` = the fold of the fitted faces (degrees, 0-180, see ``MIN_ANGLE``; 0 where no
+    edge),
     ``line[p]`` = the fitted edge line where there is one (:func:`_edge_line`; undefined
     elsewhere), ``local[p]`` = the local spacing (0 for points that are not candidates).
 
@@ -504,7 +530,7 @@ def borrow(X, dn, dn_cnt, distance, angle, line, local, width, flagged, out, ang
 
 def band(distance, angle, width):
     """The flags: candidates within ``width`` local spacings of their fitted edge, or within
-    ``SOFT_WIDTH * width`` where the planes meet at less than ``SOFT_ANGLE`` (a soft edge).
+    ``SOFT_WIDTH * width`` where the faces fold by less than ``SOFT_ANGLE`` (a soft edge).
 
     Beyond the paper. Flags are always kept, so every flagged row is budget taken from the
     faces. A row beside a soft edge (a crease, a fillet edge) buys less than one beside a

@@ -49,7 +49,7 @@ class SimplifyOptions:
         ``"paper"`` automatic threshold: lower bound (radians).
     edge_width : float
         ``"coverage"``: flag candidates within this many local spacings of the fitted edge
-        (0.7 of it beside edges whose faces meet at less than 60°, :func:`.edge_fit.band`;
+        (0.7 of it beside edges whose faces fold by less than 60°, :func:`.edge_fit.band`;
         0.5 of it from a neighbour's edge where a candidate's own fit does not flag it,
         :func:`.edge_fit.borrow`).
     coverage : float
