@@ -4,9 +4,11 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from tiledsimplify import SimplifyOptions, simplify_points
+from tiledsimplify import SimplifyOptions, simplify_points, synthetic
 from tiledsimplify.core.heap import coordinate_hash
-from tiledsimplify.core.refine import lists_from_dense, refine_coverage, thin_below
+from tiledsimplify.core.refine import (PROTECT, lists_from_dense, protected, refine_coverage,
+                                       thin_below)
+from tiledsimplify.io import read_mesh
 
 import naive
 
@@ -195,9 +197,6 @@ def test_refine_option_validated():
 def test_refinement_keeps_strongly_non_planar_points_and_may_swap_weak_candidates(data_dir):
     """Fixed in the refinement: boundary points and kept points whose boundary measure is above
     PROTECT x the threshold; kept candidates just above the threshold may be swapped out."""
-    from tiledsimplify import synthetic
-    from tiledsimplify.core.refine import PROTECT, protected
-    from tiledsimplify.io import read_mesh
     V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
     clean, _ = synthetic.scan(V, F, n_points=8000, seed=0)
     X, _ = synthetic.scan(V, F, n_points=8000, noise=0.1 * synthetic.spacing(clean), seed=0)

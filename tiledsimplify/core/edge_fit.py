@@ -375,12 +375,13 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
     cs = n1[0] * n2[0] + n1[1] * n2[1] + n1[2] * n2[2]
     if abs(cs) > np.cos(np.deg2rad(MIN_ANGLE)):
         return np.inf, 0.0  # the fold is the planes' angle or 180° less it: below MIN_ANGLE
-    # each side on its own side of the line: offsets along t_i = u x n_i, u = n1 x n2; the
-    # sign of a side's mean offset gives the direction d_i from the line into its half-plane
+    # each side on its own side of the line: offsets along t_i = u x n_i, u = n1 x n2 (unit
+    # vectors, t_1 . t_2 = n1 . n2); the sign s_i of a side's mean offset gives the direction
+    # s_i t_i from the line into its half-plane, so the half-planes' angle has cosine
+    # s_1 s_2 cs: a wedge where that is positive
     _edge_line(c1, n1, c2, n2, line)
     lx, ly, lz, ux, uy, uz = line[0], line[1], line[2], line[3], line[4], line[5]
-    d1x = d1y = d1z = 0.0
-    fold = 0.0
+    signs = 1.0
     gap = np.inf  # the least distance of a point from the line (within its plane)
     for which in range(2):
         nx, ny, nz = (n1[0], n1[1], n1[2]) if which == 0 else (n2[0], n2[1], n2[2])
@@ -402,14 +403,13 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
                 neg += 1
         if min(pos, neg) > MAX_MIXED * (pos + neg):
             return np.inf, 0.0
-        sign = 1.0 if total >= 0.0 else -1.0
-        if which == 0:
-            d1x, d1y, d1z = sign * tx / tn, sign * ty / tn, sign * tz / tn
-        else:
-            fold = 180.0 - np.rad2deg(np.arccos(max(-1.0, min(
-                sign * (d1x * tx + d1y * ty + d1z * tz) / tn, 1.0))))
-    if fold > 90.0 and gap > spacing:
-        return np.inf, 0.0  # a wedge's faces start at its line; a noisy face's halves do not
+        if total < 0.0:
+            signs = -signs
+    fold = np.rad2deg(np.arccos(min(abs(cs), 1.0)))  # the planes' angle
+    if signs * cs > 0.0:  # a wedge
+        if gap > spacing:
+            return np.inf, 0.0  # a wedge's faces start at its line; a noisy face's halves do not
+        fold = 180.0 - fold
     return _line_distance(X, p, line), fold
 
 
@@ -476,11 +476,10 @@ def borrow(X, dn, dn_cnt, distance, angle, line, local, width, flagged, out, ang
     ``out[p]``, ``angle_out[p]``: for a candidate (a point with a positive ``local`` spacing,
     :func:`localise`) that its own fit does not flag (``flagged``: :func:`band` of
     ``distance``, ``angle`` and ``width`` — no fit, or a fitted line farther than the band),
-    the distance in its local spacings
-    to the nearest fitted line (``line``) among the points of its two-ring that lie within
-    ``width`` of their own line on an edge of ``SOFT_ANGLE`` or more, and that line's angle —
-    if within ``BORROW_WIDTH * width`` and nearer than its own line; every other point keeps
-    ``distance`` and ``angle``.
+    the distance in its local spacings to the nearest fitted line (``line``) among the points
+    of its two-ring that lie within ``width`` of their own line on an edge of ``SOFT_ANGLE``
+    or more, and that line's angle — if within ``BORROW_WIDTH * width`` and nearer than its
+    own line; every other point keeps ``distance`` and ``angle``.
 
     Beyond the paper. Right on a scanned edge a two-ring can split into two planes badly (three
     to five one-ring neighbours on anisotropic scan lines, a seed across the noise) while the

@@ -5,8 +5,8 @@ core visits a point's neighbours: the local meshes, the facet tests and heap upd
 removal loop, the boundary fits, the gap refinement. In lexicographic (x, y, z) order — the
 order :func:`numpy.unique` over rows gives, the core's order before — the neighbours of a
 point lie a whole x-slab of the cloud apart in every array; along a Z-order curve they are
-mostly a few entries apart. The gain grows with the cloud, as cache misses would (the removal
-loop, below: 3.3-3.7 -> 3.0-3.1 s at 100k scan points, 13.1-14.6 -> 11.2-11.5 s at 400k).
+mostly a few entries apart (the removal loop's times against the lexicographic order are
+below).
 
 The key is **consistent across subsets**: it is made from each coordinate's own bits (an
 order-preserving map of float64 to uint64, the top ``BITS`` bits of x, y and z interleaved),
