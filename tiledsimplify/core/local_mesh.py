@@ -54,8 +54,10 @@ _SIN_ELEV = math.sin(math.radians(MAX_ELEVATION))
 
 
 @jit
-def _sort_by_distance(X, p, nbr, m, idx, d2):
-    """Fill ``idx[:m], d2[:m]`` with the neighbours and squared distances, sorted (insertion)."""
+def sort_by_distance(X, p, nbr, m, idx, d2):
+    """Fill ``idx[:m], d2[:m]`` with the points ``nbr[:m]`` and their squared distances to
+    ``p``, nearest first, ties by index (insertion sort; the lists are short). ``idx`` may be
+    ``nbr`` itself."""
     px, py, pz = X[p, 0], X[p, 1], X[p, 2]
     # all distances first (independent loads), then the sort on the two small buffers
     for k in range(m):
@@ -144,7 +146,7 @@ def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame):
         return 0
     idx = work
     d2 = fbufs[4]
-    _sort_by_distance(X, p, nbr, m, idx, d2)
+    sort_by_distance(X, p, nbr, m, idx, d2)
     for j in range(3, m):
         if d2[j] > GAP * GAP * d2[j - 1]:
             m = j

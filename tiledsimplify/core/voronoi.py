@@ -59,10 +59,11 @@ import numpy as np
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from . import adjacency
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .clip import area, clip, origin_distance2, square
 from .delaunay import delaunay_tets
 from .linalg import any_perpendicular
+from .local_mesh import sort_by_distance
 
 #: half-size of the clipping square, in units of the cloud's bounding-box diagonal
 BOX_FACTOR = 100.0
@@ -441,14 +442,50 @@ def voronoi_neighbours(X, slack=8, scale=None, reach=math.inf):
     return adjacency.from_edges(n, kept, slack=slack), how
 
 
+@jit_inline
+def _nearest_to_midpoint_first(X, a, b, cand, k):
+    """Swap the point of ``cand[:k]`` (not ``a`` or ``b``) nearest to the midpoint of ``a`` and
+    ``b`` into ``cand[0]``.
+
+    The order of the constraints does not change whether a facet is empty, only how soon the
+    clipping finds out: a point near the midpoint (above all one inside the ball with
+    diameter ``ab``, nearer to the midpoint than ``a`` and ``b`` are) cuts the facet's middle
+    away, usually leaving little for the rest. With
+    the link sorted nearest to ``p`` first as well, a pair with no facet is rejected after
+    4.7 / 4.2 constraints on average instead of 6.7 / 6.2, and a pair with one is decided
+    after 23.5 / 21.7 instead of 24.3 / 22.2: 21-22 % fewer clipping steps (removal loop,
+    ratio 0.2, on 36k points of the Bunny range scans / of the Fandisk line scan; 870k / 810k
+    pairs with no facet, 124k / 115k with one). The edges found are the same.
+    """
+    mx = 0.5 * (X[a, 0] + X[b, 0])
+    my = 0.5 * (X[a, 1] + X[b, 1])
+    mz = 0.5 * (X[a, 2] + X[b, 2])
+    best = math.inf
+    jb = -1
+    for j in range(k):
+        c = cand[j]
+        if c == a or c == b:
+            continue
+        ex, ey, ez = X[c, 0] - mx, X[c, 1] - my, X[c, 2] - mz
+        e2 = ex * ex + ey * ey + ez * ez
+        if e2 < best:
+            best = e2
+            jb = j
+    if jb > 0:
+        c = cand[jb]
+        cand[jb] = cand[0]
+        cand[0] = c
+
+
 @jit
 def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand, bufs, lbufs,
                  frame, mark):
     """Remove ``p`` from the Voronoi-neighbour lists and add the facets its removal opens.
 
     Paper §3.3: "by updating the Voronoi diagram of P" — done exactly and locally. After the
-    call ``link[:k]`` holds the former neighbours of ``p`` (``k`` is returned); the pool may
-    have moved, so the (possibly new) pool is returned too: ``(k, pool)``.
+    call ``link[:k]`` holds the former neighbours of ``p``, nearest first (``k`` is
+    returned); the pool may have moved, so the (possibly new) pool is returned too:
+    ``(k, pool)``.
 
     ``cand`` must have room for ``max degree + cnt[p]`` entries; ``bufs`` (4, m) and
     ``lbufs`` (2, m) are clipping scratch with ``m >= len(cand) + 5``. ``mark`` (int64, one
@@ -463,7 +500,10 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
         adjacency.remove(start, cnt, pool, link[j], p)
     # constraints: the whole former link of p, then the current neighbours of a. Most pairs
     # have no facet, and the points that block one are mostly in the link: first come, the
-    # clipped polygon empties after a few constraints.
+    # clipped polygon empties after a few constraints. The link goes nearest to p first (a new
+    # facet lies in p's old cell), and for each pair the link point nearest to its midpoint
+    # is moved to the front (see _nearest_to_midpoint_first).
+    sort_by_distance(X, p, link, k, link, bufs[0])
     for j in range(k):
         cand[j] = link[j]
     for ia in range(k):
@@ -484,6 +524,7 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
                 dx, dy, dz = X[b, 0] - X[a, 0], X[b, 1] - X[a, 1], X[b, 2] - X[a, 2]
                 if dx * dx + dy * dy + dz * dz >= 4.0 * reach * reach:
                     continue
+            _nearest_to_midpoint_first(X, a, b, cand, k)
             if facet_positive(X, a, b, cand, na + k, half, tol, reach,
                               bufs[0], bufs[1], lbufs[0], bufs[2], bufs[3], lbufs[1], frame, p):
                 pool = adjacency.append(start, cnt, cap, pool, meta, a, b)
