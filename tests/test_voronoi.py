@@ -106,9 +106,14 @@ def _remove_sequence(X, victims, reach=np.inf):
     frame = np.empty((3, 3))
     mark = np.full(len(X), -1, np.int64)
     for p in victims:
+        former = pool[start[p]:start[p] + cnt[p]].copy()
         k, pool = voronoi.remove_point(X, p, start, cnt, cap, pool, meta,
                                        voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D,
                                        reach, link, cand, bufs, lbufs, frame, mark)
+        # link[:k]: the former neighbours, nearest to p first (ties by index)
+        d2 = ((X[link[:k]] - X[p]) ** 2).sum(axis=1)
+        assert sorted(link[:k].tolist()) == sorted(former.tolist())
+        assert link[:k].tolist() == [int(q) for _, q in sorted(zip(d2, link[:k]))]
     alive = np.ones(len(X), bool)
     alive[victims] = False
     maintained = adjacency.to_sets(start, cnt, pool, alive)

@@ -450,12 +450,12 @@ def _nearest_to_midpoint_first(X, a, b, cand, k):
     The order of the constraints does not change whether a facet is empty, only how soon the
     clipping finds out: a point near the midpoint (above all one inside the ball with
     diameter ``ab``, nearer to the midpoint than ``a`` and ``b`` are) cuts the facet's middle
-    away, usually leaving little for the rest. With
-    the link sorted nearest to ``p`` first as well, a pair with no facet is rejected after
-    4.7 / 4.2 constraints on average instead of 6.7 / 6.2, and a pair with one is decided
-    after 23.5 / 21.7 instead of 24.3 / 22.2: 21-22 % fewer clipping steps (removal loop,
-    ratio 0.2, on 36k points of the Bunny range scans / of the Fandisk line scan; 870k / 810k
-    pairs with no facet, 124k / 115k with one). The edges found are the same.
+    away, usually leaving little for the rest. With the link sorted nearest to ``p`` first as
+    well, a pair with no facet is rejected after 4.7 / 4.2 constraints on average instead of
+    6.7 / 6.2, and a pair with one is decided after 23.5 / 21.7 instead of 24.3 / 22.2: 21-22 %
+    fewer clipping steps (removal loop, ratio 0.2, on 36k points of the Bunny range scans / of
+    the Fandisk line scan; 870k / 810k pairs with no facet, 124k / 115k with one). The edges
+    found are the same.
     """
     mx = 0.5 * (X[a, 0] + X[b, 0])
     my = 0.5 * (X[a, 1] + X[b, 1])
