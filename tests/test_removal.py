@@ -74,8 +74,8 @@ def test_maintained_state_equals_recomputation(kind, measure, reach):
     steps = int(removable.sum()) * 3 // 4
     order, at, st.pool = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), code, weight, 0, 0.0,
-        steps, BOX_FACTOR * D, TOL_FACTOR * D, reach)
+        st.normals, st.stable, flags, removable.copy(), imp, heap.coordinate_hash(X), code,
+        weight, 0, 0.0, steps, BOX_FACTOR * D, TOL_FACTOR * D, reach)
     assert len(order) == steps == len(set(order.tolist()))
     assert not (flags[order] | frozen[order]).any()
     alive = np.ones(len(X), bool)
@@ -92,7 +92,9 @@ def test_maintained_state_equals_recomputation(kind, measure, reach):
         dn_m = st.dn[p, : st.dn_cnt[p]].tolist()
         dn_f = keep[fresh.dn[i, : fresh.dn_cnt[i]]].tolist()
         assert dn_m == dn_f, p
+        np.testing.assert_array_equal(st.plane_normals[p], fresh.plane_normals[i])
         np.testing.assert_array_equal(st.normals[p], fresh.normals[i])
+        assert st.stable[p] == fresh.stable[i], p  # kept right where recomputation was skipped
         if removable[p]:
             assert imp[p] == imp_f[i], p
 
@@ -133,8 +135,8 @@ def test_greedy_order_equals_naive_from_scratch(kind, measure, reach):
     steps = int(removable.sum()) - 5
     order, at, _ = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-        st.normals, flags, removable.copy(), imp, heap.coordinate_hash(X), code, weight, 0, 0.0,
-        steps, BOX_FACTOR * D, TOL_FACTOR * D, reach)
+        st.normals, st.stable, flags, removable.copy(), imp, heap.coordinate_hash(X), code,
+        weight, 0, 0.0, steps, BOX_FACTOR * D, TOL_FACTOR * D, reach)
     ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D, code, weight, reach)
     assert order.tolist() == ref_order
     np.testing.assert_array_equal(at, ref_at)

@@ -22,6 +22,12 @@ that form a local mesh centred at ``p``. The selection rule implemented here:
 5. If fewer than three neighbours own an edge (collinear data, a handful of points), ``DN_p``
    falls back to the nearest three Voronoi neighbours.
 
+When a neighbour leaves ``VN_p`` (paper §3.3: a removal), the selection need not be redone if
+the neighbour took no part in it: not among the plane's neighbours, owning no edge of the
+cell, opening no new distance jump (:func:`local_mesh`'s ``stable``,
+:func:`unchanged_without`). The removal loop skips those recomputations; tests compare its
+maintained local meshes with fresh ones, and its whole order with a naive greedy.
+
 ``DN_p`` is returned sorted by index, so everything computed from it is independent of the
 order in which the lists were built or updated.
 """
@@ -87,9 +93,11 @@ def _plane_size(X, p, idx, d2, m):
     within ``FIT`` times the third-nearest distance take part: a border point's Voronoi
     neighbours include far points whose spread would "win" with a plane across open air.
 
-    Returns ``(k, moments, l0, l2, known)``: if ``known``, the running moments of ``p`` and the
-    ``k`` nearest (summed as :func:`.linalg.covariance_about` sums them) and the smallest and
-    largest eigenvalue of their covariance, which the plane fit reuses.
+    Returns ``(k, moments, l0, l2, known, first)``: if ``known``, the running moments of ``p``
+    and the ``k`` nearest (summed as :func:`.linalg.covariance_about` sums them) and the
+    smallest and largest eigenvalue of their covariance, which the plane fit reuses;
+    ``first``: ``k`` is the first that reaches ``SPREAD`` (it then depends on the ``k``
+    nearest alone).
     """
     if m >= 3:
         limit = FIT * FIT * d2[2]
@@ -107,7 +115,7 @@ def _plane_size(X, p, idx, d2, m):
         if k >= MIN_PLANE:
             l0, l1, l2 = sym3_eigvals(*moments_covariance(mom, k))
             if _ratio(l1, l2) >= SPREAD:
-                return k, mom, l0, l2, True
+                return k, mom, l0, l2, True, True
     mom = NO_MOMENTS
     best = -1.0
     kbest = m
@@ -124,7 +132,7 @@ def _plane_size(X, p, idx, d2, m):
             kbest = k
             mbest = mom
             l0best, l2best, known = l0, l2, True
-    return kbest, mbest, l0best, l2best, known
+    return kbest, mbest, l0best, l2best, known, False
 
 
 @jit_inline
@@ -134,13 +142,24 @@ def _ratio(l1, l2):
 
 
 @jit
-def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame):
+def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame, stable):
     """Select ``DN_p`` from the Voronoi neighbours ``nbr[:m]`` of ``p``; returns its size.
 
     The selected indices are written, sorted, to ``out``; the reference-plane normal to
     ``normal0``. ``work`` is an int64 buffer and ``fbufs`` (5, >= m + 5) / ``lbufs``
     (3, >= m + 5) / ``frame`` (2, 3) scratch.
+
+    ``stable[0]`` is set to the number ``k`` of nearest neighbours the reference plane was
+    fitted to when losing any other neighbour ``q`` cannot change ``DN_p`` or that plane, as
+    long as ``q`` is not in ``DN_p``, ``q`` is not among the ``k`` nearest, and its going
+    opens no new distance jump (:func:`unchanged_without`); else to 0. That holds when the
+    plane came from the first ``k >= MIN_PLANE`` reaching ``SPREAD`` (the ``k`` nearest alone
+    decide it) and ``DN_p`` is exactly the owners of the cell's edges — at most ``MAX_DN`` of
+    them, at least three, none of an edge shorter than ``1e3`` times the negligible length
+    (no near tie). Then such a ``q`` owns no edge of the cell: its half-plane holds the cell,
+    and the cell, hence ``DN_p``, is the same without it.
     """
+    stable[0] = 0
     if m == 0:
         normal0[0], normal0[1], normal0[2] = 0.0, 0.0, 1.0
         return 0
@@ -153,7 +172,7 @@ def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame):
             break
     px, py, pz = X[p, 0], X[p, 1], X[p, 2]
     # 2. reference plane from the nearest, non-collinear neighbours (p included)
-    k, mom, l0, l2, known = _plane_size(X, p, idx, d2, m)
+    k, mom, l0, l2, known, first = _plane_size(X, p, idx, d2, m)
     t1 = frame[0]
     t2 = frame[1]
     if known:  # the same sums and eigenvalues as computed afresh
@@ -215,19 +234,28 @@ def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame):
     for j in range(m):
         flag[j] = 0
     eps = 1e-9 * half
+    near_tie = n < 3
     for i in range(n):
         lab = ls[i]
         if lab < 0:
             continue
         i2 = i + 1 if i + 1 < n else 0
         ex, ey = xs[i2] - xs[i], ys[i2] - ys[i]
-        if ex * ex + ey * ey > eps * eps:
+        e2 = ex * ex + ey * ey
+        if e2 > eps * eps:
             flag[lab] = 1
+        if e2 <= 1e6 * eps * eps:
+            near_tie = True
     c = 0
+    owners = 0
     for j in range(m):
-        if flag[j] == 1 and c < MAX_DN:
-            out[c] = idx[j]
-            c += 1
+        if flag[j] == 1:
+            owners += 1
+            if c < MAX_DN:
+                out[c] = idx[j]
+                c += 1
+    if first and not near_tie and 3 <= owners <= MAX_DN:
+        stable[0] = k
     if c < 3:
         c = min(3, m)
         for j in range(c):
@@ -244,8 +272,9 @@ def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame):
 
 
 @jit
-def all_local_meshes(X, start, cnt, pool, dn, dn_cnt, plane_normals):
-    """``DN_p`` for every point from the Voronoi-neighbour lists (see :func:`local_mesh`)."""
+def all_local_meshes(X, start, cnt, pool, dn, dn_cnt, plane_normals, stable):
+    """``DN_p`` for every point from the Voronoi-neighbour lists (see :func:`local_mesh`;
+    ``stable[p]``: its ``stable[0]``)."""
     n = X.shape[0]
     maxdeg = 1
     for i in range(n):
@@ -258,4 +287,39 @@ def all_local_meshes(X, start, cnt, pool, dn, dn_cnt, plane_normals):
     for p in range(n):
         s = start[p]
         dn_cnt[p] = local_mesh(X, p, pool[s:s + cnt[p]], cnt[p], dn[p], work, fbufs, lbufs,
-                               plane_normals[p], frame)
+                               plane_normals[p], frame, stable[p:p + 1])
+
+
+@jit
+def unchanged_without(X, p, nbr, m, q, k):
+    """True if ``DN_p`` and its reference plane stay as they are when neighbour ``q`` leaves
+    the list ``nbr[:m]`` (which no longer holds it, and gained nothing since ``DN_p`` was
+    selected), given ``k = stable[0]`` from that selection (:func:`local_mesh`; 0: never) and
+    ``q`` not in ``DN_p``.
+
+    ``q`` must not have been among the ``k`` nearest (ties by index, as
+    :func:`sort_by_distance`), and its going must not join two neighbours whose distances
+    jump by more than ``GAP`` (a new cut of the list). Every step of the selection then sees
+    the same neighbours, less one that owned no edge of the cell.
+    """
+    if k == 0:
+        return False
+    px, py, pz = X[p, 0], X[p, 1], X[p, 2]
+    dx, dy, dz = X[q, 0] - px, X[q, 1] - py, X[q, 2] - pz
+    dq = dx * dx + dy * dy + dz * dz  # as sort_by_distance computes it: the same ties
+    rank = 0
+    lo = -1.0  # the largest squared distance before q, the smallest after it
+    hi = np.inf
+    for j in range(m):
+        r = nbr[j]
+        dx, dy, dz = X[r, 0] - px, X[r, 1] - py, X[r, 2] - pz
+        d = dx * dx + dy * dy + dz * dz
+        if d < dq or (d == dq and r < q):
+            rank += 1
+            if d > lo:
+                lo = d
+        elif d < hi:
+            hi = d
+    if rank < k:
+        return False
+    return hi == np.inf or hi <= GAP * GAP * lo

@@ -23,7 +23,7 @@ import numpy as np
 from . import heap
 from ._jit import jit
 from .importance import importance_of
-from .local_mesh import MAX_DN, local_mesh
+from .local_mesh import MAX_DN, local_mesh, unchanged_without
 from .normals import normal_at
 from .voronoi import remove_point
 
@@ -64,13 +64,17 @@ def _max_count(cnt, items, k):
 
 
 @jit
-def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
+def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable,
                   boundary, removable, importance, tie, code, weight, guard, guard_value, n_steps,
                   half, tol, reach, stop_above=math.inf):
     """Remove up to ``n_steps`` points, least important first.
 
     Mutates the neighbour lists, local meshes, normals and importance in place (for the
-    remaining points). ``removable`` marks the candidates (not boundary, not frozen, alive);
+    remaining points). ``stable`` holds each point's :func:`.local_mesh.local_mesh`
+    ``stable[0]`` (kept up to date here): a former neighbour of the removed point whose local
+    mesh provably stays as it is (:func:`.local_mesh.unchanged_without`) is not recomputed —
+    24-33 % of them on scans, the Bunny and Autzen, for 6-8 % off the loop's time.
+    ``removable`` marks the candidates (not boundary, not frozen, alive);
     ``half``, ``tol`` and ``reach`` are the Voronoi rule's (:func:`.voronoi.facet_positive`).
     ``tie`` (uint64) breaks importance ties (see :mod:`.heap`); ``code`` and ``weight`` select the
     importance measure (:func:`.importance.importance_of`). ``guard`` / ``guard_value``
@@ -110,6 +114,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     newdn = np.empty(MAX_DN, dtype=np.int64)
     nvec = np.empty(3)
     wvec = np.empty(3)
+    before = np.zeros(n, dtype=np.int64)  # list sizes before the current removal
     step = 0
     while step < n_steps and size > 0:
         p = heap.pop(hp, pos, importance, tie, size)
@@ -127,6 +132,9 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
             cand = np.empty(2 * need, dtype=np.int64)
             bufs = np.empty((4, 2 * need + 5))
             lbufs = np.empty((2, 2 * need + 5), dtype=np.int64)
+        for j in range(cnt[p]):
+            q = pool[start[p] + j]
+            before[q] = cnt[q]
         k, pool = remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand,
                                bufs, lbufs, frame, mark)
         # -- 2. local meshes and normals of the first ring
@@ -138,8 +146,18 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
         for j in range(k):
             a = link[j]
             s = start[a]
+            if cnt[a] == before[a] - 1 and stable[a] > 0:  # lost p, gained nothing
+                in_dn = False
+                for i in range(dn_cnt[a]):
+                    if dn[a, i] == p:
+                        in_dn = True
+                        break
+                if not in_dn and unchanged_without(X, a, pool[s:s + cnt[a]], cnt[a], p,
+                                                   stable[a]):
+                    mesh_changed[a] = False
+                    continue  # the same DN_a and reference plane, so the same normal
             c = local_mesh(X, a, pool[s:s + cnt[a]], cnt[a], newdn, work, fbufs, mbufs,
-                           nvec, frame[:2])
+                           nvec, frame[:2], stable[a:a + 1])
             same = c == dn_cnt[a]
             if same:
                 for i in range(c):

@@ -76,6 +76,12 @@ class Neighbourhoods:
     initial_normals: np.ndarray
     how: str
     reach: float = math.inf
+    #: per point, :func:`.local_mesh.local_mesh`'s ``stable[0]`` (0: always recompute)
+    stable: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.stable is None:
+            self.stable = np.zeros(self.cnt.size, dtype=np.int64)
 
     def to_arrays(self):
         """Compact arrays of a freshly built state: ``(arrays, how)``.
@@ -91,7 +97,8 @@ class Neighbourhoods:
                 "dn_count": self.dn_cnt.astype(np.int8),
                 "dn": self.dn[used].astype(np.int32),
                 "plane_normals": self.plane_normals,
-                "normals": self.normals}, self.how
+                "normals": self.normals,
+                "stable": self.stable.astype(np.int16)}, self.how
 
     @classmethod
     def from_arrays(cls, arrays, how):
@@ -102,9 +109,11 @@ class Neighbourhoods:
         dn[np.arange(MAX_DN) < dn_cnt[:, None]] = arrays["dn"]
         normals = np.ascontiguousarray(arrays["normals"], dtype=np.float64)
         reach = float(np.asarray(arrays.get("reach", [math.inf])).reshape(-1)[0])
+        stable = (np.asarray(arrays["stable"], dtype=np.int64) if "stable" in arrays
+                  else np.zeros(dn_cnt.size, dtype=np.int64))  # a state saved before it: 0
         return cls(start, cnt, cap, pool, meta, dn, dn_cnt,
                    np.ascontiguousarray(arrays["plane_normals"], dtype=np.float64), normals,
-                   normals.copy(), str(how), reach)
+                   normals.copy(), str(how), reach, stable)
 
 
 def neighbourhoods(Xu, scale, reach=math.inf):
@@ -115,11 +124,12 @@ def neighbourhoods(Xu, scale, reach=math.inf):
     dn = np.zeros((m, MAX_DN), dtype=np.int64)
     dn_cnt = np.zeros(m, dtype=np.int64)
     plane_normals = np.zeros((m, 3))
-    all_local_meshes(Xu, start, cnt, pool, dn, dn_cnt, plane_normals)
+    stable = np.zeros(m, dtype=np.int64)
+    all_local_meshes(Xu, start, cnt, pool, dn, dn_cnt, plane_normals, stable)
     normals = np.zeros((m, 3))
     all_normals(Xu, dn, dn_cnt, plane_normals, normals)
     return Neighbourhoods(start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
-                          normals.copy(), how, float(reach))
+                          normals.copy(), how, float(reach), stable)
 
 
 def median_spacing(Xu):
@@ -372,9 +382,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     def remove(n_steps, stop_above):
         order_k, at_k, st.pool = remove_points(
             Xu, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-            st.normals, boundary_u, alive, imp_u, tie, code, weight, GUARDS[options.guard],
-            float(options.max_spacing or 0.0), n_steps, BOX_FACTOR * D, TOL_FACTOR * D,
-            st.reach, stop_above)
+            st.normals, st.stable, boundary_u, alive, imp_u, tie, code, weight,
+            GUARDS[options.guard], float(options.max_spacing or 0.0), n_steps, BOX_FACTOR * D,
+            TOL_FACTOR * D, st.reach, stop_above)
         return order_k, at_k
 
     if not options.progressive:
