@@ -86,7 +86,7 @@ class Neighbourhoods:
     def to_arrays(self):
         """Compact arrays of a freshly built state: ``(arrays, how)``.
 
-        Lists lose their spare capacity and ids become int32 (~130 bytes per point);
+        Lists lose their spare capacity and ids become int32 (~134 bytes per point);
         :meth:`from_arrays` rebuilds the identical state, so a run from it gives the same
         result bit for bit.
         """
@@ -98,7 +98,7 @@ class Neighbourhoods:
                 "dn": self.dn[used].astype(np.int32),
                 "plane_normals": self.plane_normals,
                 "normals": self.normals,
-                "stable": self.stable.astype(np.int16)}, self.how
+                "stable": self.stable.astype(np.int32)}, self.how
 
     @classmethod
     def from_arrays(cls, arrays, how):
