@@ -97,7 +97,7 @@ def test_saved_neighbourhood_state_gives_the_same_run():
     arrays, how = state.to_arrays()
     back = Neighbourhoods.from_arrays(arrays, how)
     for name in ("start", "cnt", "cap", "pool", "meta", "dn", "dn_cnt", "plane_normals",
-                 "normals", "initial_normals"):
+                 "normals", "initial_normals", "stable"):
         np.testing.assert_array_equal(getattr(back, name), getattr(state, name), err_msg=name)
     again = simplify_points(X, count=len(X), frozen=frozen, state=back, options=paper)
     np.testing.assert_array_equal(again.order, fresh.order)

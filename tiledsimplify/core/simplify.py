@@ -74,14 +74,10 @@ class Neighbourhoods:
     plane_normals: np.ndarray
     normals: np.ndarray
     initial_normals: np.ndarray
+    #: per point, :func:`.local_mesh.local_mesh`'s ``stable[0]`` (0: always recompute)
+    stable: np.ndarray
     how: str
     reach: float = math.inf
-    #: per point, :func:`.local_mesh.local_mesh`'s ``stable[0]`` (0: always recompute)
-    stable: np.ndarray | None = None
-
-    def __post_init__(self):
-        if self.stable is None:
-            self.stable = np.zeros(self.cnt.size, dtype=np.int64)
 
     def to_arrays(self):
         """Compact arrays of a freshly built state: ``(arrays, how)``.
@@ -113,7 +109,7 @@ class Neighbourhoods:
                   else np.zeros(dn_cnt.size, dtype=np.int64))  # a state saved before it: 0
         return cls(start, cnt, cap, pool, meta, dn, dn_cnt,
                    np.ascontiguousarray(arrays["plane_normals"], dtype=np.float64), normals,
-                   normals.copy(), str(how), reach, stable)
+                   normals.copy(), stable, str(how), reach)
 
 
 def neighbourhoods(Xu, scale, reach=math.inf):
@@ -129,7 +125,7 @@ def neighbourhoods(Xu, scale, reach=math.inf):
     normals = np.zeros((m, 3))
     all_normals(Xu, dn, dn_cnt, plane_normals, normals)
     return Neighbourhoods(start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals,
-                          normals.copy(), how, float(reach), stable)
+                          normals.copy(), stable, how, float(reach))
 
 
 def median_spacing(Xu):
