@@ -169,6 +169,53 @@ def test_facet_witness_accepts_only_positive_facets(kind, reach):
         assert len(clipped) < 0.9 * len(edges)
 
 
+@pytest.mark.parametrize("reach", [np.inf, 3.0])
+@pytest.mark.parametrize("kind", ["cube", "sphere", "grid"])
+def test_polygon_witness_changes_no_answer(kind, reach, monkeypatch):
+    """facet_positive returns early when the partly clipped polygon's vertex mean lies well
+    inside every constraint; the answer is the one the clipping alone gives (its pure-Python
+    version run with the shortcut off), with and without the ``inside`` cut of the removal
+    loop, on generic points and on a grid full of exact ties."""
+    rng = np.random.default_rng(11)
+    if kind == "cube":
+        X = rng.random((300, 3))
+    elif kind == "sphere":
+        X = _sphere(rng, 300)
+    else:
+        X = np.stack(np.meshgrid(*[np.arange(7.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
+        X = X[rng.random(len(X)) < 0.8] * 0.001 + 1000.0
+    X = X - X.mean(0)
+    if np.isfinite(reach):
+        reach *= np.median(cKDTree(X).query(X, k=2)[0][:, 1])
+    D = voronoi.scale_of(X)
+    half, tol = voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D
+    edges, _ = voronoi.candidate_edges(X, reach)
+    start, cnt, cap, pool, meta = adjacency.from_edges(len(X), edges, slack=0)
+    # constraints as the removal loop gives them: a's list plus the two-ring of a (so that
+    # many facets meet more than CENTROID_AFTER constraints)
+    size = 2 * cnt.max() ** 2 + 5
+    bufs, lbufs, frame = np.empty((4, size)), np.empty((2, size), np.int64), np.empty((3, 3))
+    args = []
+    for a in range(0, len(X), 3):
+        cand = pool[start[a]:start[a] + cnt[a]]
+        ring = np.unique(np.concatenate([pool[start[q]:start[q] + cnt[q]] for q in cand]))
+        ring = np.concatenate([cand, ring[~np.isin(ring, cand)]])
+        for b in cand[cand > a][:4]:
+            for inside in (-1, int(rng.choice(cand))):
+                if inside != b:
+                    args.append((a, int(b), ring, inside))
+    fast = [voronoi.facet_positive(X, a, b, c, len(c), half, tol, reach, bufs[0], bufs[1],
+                                   lbufs[0], bufs[2], bufs[3], lbufs[1], frame, i)
+            for a, b, c, i in args]
+    monkeypatch.setattr(voronoi, "CENTROID_AFTER", 10**9)
+    slow = [voronoi.facet_positive.py_func(X, a, b, c, len(c), half, tol, reach, bufs[0],
+                                           bufs[1], lbufs[0], bufs[2], bufs[3], lbufs[1],
+                                           frame, i)
+            for a, b, c, i in args]
+    assert fast == slow
+    assert 0.2 * len(args) < sum(slow) < 0.9 * len(args)
+
+
 @pytest.mark.parametrize("reach", [np.inf, 4.0])
 @pytest.mark.parametrize("kind", ["cube", "sphere", "plate", "quantised"])
 def test_maintenance_equals_rebuild(kind, reach):

@@ -73,6 +73,57 @@ TOL_FACTOR = 1e-8
 JITTER = 1e-10
 
 
+#: every this many constraints, :func:`facet_positive` (in the removal loop) tries the
+#: clipped polygon's vertex mean as a witness against every constraint, without clipping
+CENTROID_AFTER = 6
+
+
+@jit_inline
+def _vertex_mean(n, xs, ys):
+    """The mean of the vertices of the polygon ``(xs, ys)[:n]`` (inside it: it is convex)."""
+    sx = 0.0
+    sy = 0.0
+    for i in range(n):
+        sx += xs[i]
+        sy += ys[i]
+    return sx / n, sy / n
+
+
+@jit_inline
+def _beyond_by(X, a, b, cand, lo, hi, cx, cy, cz, tol):
+    """True if ``c`` (relative to ``a``) lies nearer to ``a`` than to every ``s`` of
+    ``cand[lo:hi]`` (not ``a``, ``b``), by at least ``4 tol`` in distance to their bisector
+    (``h = |s|² - 2 s·c`` is ``2 |s|`` times that distance)."""
+    ax, ay, az = X[a, 0], X[a, 1], X[a, 2]
+    for k in range(lo, hi):
+        q = cand[k]
+        if q == a or q == b:
+            continue
+        sx, sy, sz = X[q, 0] - ax, X[q, 1] - ay, X[q, 2] - az
+        s2 = sx * sx + sy * sy + sz * sz
+        h = s2 - 2.0 * (sx * cx + sy * cy + sz * cz)
+        if h < 0.0 or h * h < 64.0 * tol * tol * s2:
+            return False
+    return True
+
+
+@jit_inline
+def _deep_inside(X, a, b, cand, first, ncand, inside, cx, cy, cz, tol):
+    """True if ``c`` (relative to ``a``) lies at least ``4 tol`` inside every constraint of
+    :func:`facet_positive`: nearer to ``a`` than to each ``s`` of ``cand[:ncand]`` and nearer
+    to ``inside`` than to ``a``. The constraints from ``first`` on (not yet clipped, so the
+    likeliest to fail) are checked first."""
+    if not _beyond_by(X, a, b, cand, first, ncand, cx, cy, cz, tol):
+        return False
+    if not _beyond_by(X, a, b, cand, 0, first, cx, cy, cz, tol):
+        return False
+    ax, ay, az = X[a, 0], X[a, 1], X[a, 2]
+    sx, sy, sz = X[inside, 0] - ax, X[inside, 1] - ay, X[inside, 2] - az
+    s2 = sx * sx + sy * sy + sz * sz
+    h = 2.0 * (sx * cx + sy * cy + sz * cz) - s2
+    return h >= 0.0 and h * h >= 64.0 * tol * tol * s2
+
+
 @jit
 def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, lb, frame,
                    inside):
@@ -87,6 +138,18 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
     ``inside >= 0``, the facet is first clipped to ``|x - inside| <= |x - a|``: after the
     removal of ``inside`` a new facet lies entirely in its former cell, and this one cut
     usually leaves little for the others to empty.
+
+    With ``inside >= 0`` (the removal loop), after every ``CENTROID_AFTER`` constraints the
+    mean of the clipped polygon's vertices is tried as a witness, as :func:`facet_witness`
+    tries the midpoint: if it lies ``4 tol`` inside every constraint (checked by one dot
+    product each, no clipping) and within ``half - 5 tol`` of the midpoint, a disc of radius
+    ``3 tol`` around it survives all the clipping, so the facet is positive. A test that finds
+    a facet used to clip all its ~20-24 constraints; it is now 25-30 % cheaper, a test that
+    finds none 5-10 % dearer (failed tries), the facet tests of the removal loop 9-12 % cheaper
+    in all (cycle counters, medians of 5-6 paired runs: 49.7k -> 43.4k cycles per removal on
+    36k Bunny-range points, 32.6k -> 29.7k on 100k scan points). In the initial filter the
+    polygon is still the whole reach disc after six cuts and the tries saved nothing: off.
+    The answer is the clipping's (tested against the clipping alone on tie-rich grids).
 
     ``xa, ya, la, xb, yb, lb`` are scratch buffers of length at least ``ncand + 5``; ``frame``
     is a (3, 3) scratch array.
@@ -112,6 +175,8 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
     e2[1] = u2 * e1[0] - u0 * e1[2]
     e2[2] = u0 * e1[1] - u1 * e1[0]
     mx, my, mz = 0.5 * dx, 0.5 * dy, 0.5 * dz
+    rw = half - 5.0 * tol  # a witness this near the midpoint is inside the square and disc
+    until = CENTROID_AFTER if inside >= 0 else -1  # constraints left before the next try
     n = square(half, xa, ya, la)
     cur = 0  # which buffer holds the polygon
     if inside >= 0:
@@ -160,6 +225,17 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
                 cur = 0
         if n < 3:
             return False
+        until -= 1
+        if until == 0:
+            until = CENTROID_AFTER
+            if cur == 0:
+                cx, cy = _vertex_mean(n, xa, ya)
+            else:
+                cx, cy = _vertex_mean(n, xb, yb)
+            if cx * cx + cy * cy < rw * rw and _deep_inside(
+                    X, a, b, cand, k + 1, ncand, inside, mx + cx * e1[0] + cy * e2[0],
+                    my + cx * e1[1] + cy * e2[1], mz + cx * e1[2] + cy * e2[2], tol):
+                return True
     if cur == 0:
         return area(n, xa, ya) > 0.0 and (r2 == math.inf or origin_distance2(n, xa, ya) < r2)
     return area(n, xb, yb) > 0.0 and (r2 == math.inf or origin_distance2(n, xb, yb) < r2)
