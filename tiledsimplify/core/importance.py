@@ -31,7 +31,7 @@ new measures plug in without touching the loop.
 
 import math
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 
 #: name -> code of the importance measures the removal kernel knows
 MEASURES = {"paper": 0, "coverage": 1}
@@ -50,7 +50,7 @@ def coverage_weight(spacing, strength):
     return float(strength) / (LENGTH_SPACINGS * float(spacing))
 
 
-@jit
+@jit_inline
 def eq1(X, normals, boundary, p, dn, c):
     """Eq. (1) for point ``p`` with local-mesh neighbours ``dn[:c]``."""
     total = 0.0
@@ -69,7 +69,7 @@ def eq1(X, normals, boundary, p, dn, c):
     return total / k
 
 
-@jit
+@jit_inline
 def spread2(X, p, dn, c):
     """``ρ(p)²``: mean squared distance from ``p`` to ``dn[:c]`` (0 if ``c == 0``)."""
     if c == 0:
@@ -82,7 +82,7 @@ def spread2(X, p, dn, c):
     return total / c
 
 
-@jit
+@jit_inline
 def importance_of(code, X, normals, boundary, p, dn, c, weight):
     """Dispatch to the measure with the given code (see :data:`MEASURES`).
 

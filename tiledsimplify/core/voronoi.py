@@ -124,7 +124,7 @@ def _deep_inside(X, a, b, cand, first, ncand, inside, cx, cy, cz, tol):
     return h >= 0.0 and h * h >= 64.0 * tol * tol * s2
 
 
-@jit
+@jit_inline
 def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, lb, frame,
                    inside):
     """True if points ``a`` and ``b`` share a Voronoi facet of positive area within ``reach``.
