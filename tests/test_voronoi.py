@@ -127,6 +127,27 @@ def _remove_sequence(X, victims, reach=np.inf):
     return maintained, fresh_global
 
 
+def _candidates(kind, n, side, rng, reach):
+    """A centred cloud (``n`` points in a cube or near a sphere, or a ``side``³ grid with 20 %
+    missing, full of exact ties), its reach in model units (given in spacings), the facet
+    tolerances, and the unfiltered candidate lists."""
+    if kind == "cube":
+        X = rng.random((n, 3))
+    elif kind == "sphere":
+        X = _sphere(rng, n)
+    else:
+        X = np.stack(np.meshgrid(*[np.arange(float(side))] * 3, indexing="ij"), -1)
+        X = X.reshape(-1, 3)
+        X = X[rng.random(len(X)) < 0.8] * 0.001 + 1000.0
+    X = X - X.mean(0)
+    if np.isfinite(reach):
+        reach *= np.median(cKDTree(X).query(X, k=2)[0][:, 1])
+    D = voronoi.scale_of(X)
+    edges, _ = voronoi.candidate_edges(X, reach)
+    lists = adjacency.from_edges(len(X), edges, slack=0)
+    return X, reach, voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D, edges, lists
+
+
 @pytest.mark.parametrize("reach", [np.inf, 3.0])
 @pytest.mark.parametrize("kind", ["cube", "sphere", "grid"])
 def test_facet_witness_accepts_only_positive_facets(kind, reach):
@@ -135,20 +156,8 @@ def test_facet_witness_accepts_only_positive_facets(kind, reach):
     ties (four co-circular points per cell face: midpoints on a constraint, degenerate facets
     the clipping drops)."""
     rng = np.random.default_rng(7)
-    if kind == "cube":
-        X = rng.random((600, 3))
-    elif kind == "sphere":
-        X = _sphere(rng, 600)
-    else:
-        X = np.stack(np.meshgrid(*[np.arange(8.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
-        X = X[rng.random(len(X)) < 0.8] * 0.001 + 1000.0
-    X = X - X.mean(0)
-    if np.isfinite(reach):
-        reach *= np.median(cKDTree(X).query(X, k=2)[0][:, 1])
-    D = voronoi.scale_of(X)
-    half, tol = voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D
-    edges, _ = voronoi.candidate_edges(X, reach)
-    start, cnt, cap, pool, meta = adjacency.from_edges(len(X), edges, slack=0)
+    X, reach, half, tol, edges, (start, cnt, cap, pool, meta) = _candidates(kind, 600, 8, rng,
+                                                                            reach)
     size = cnt.max() + 5  # clipping scratch, as filter_candidates sizes it
     bufs, lbufs, frame = np.empty((4, size)), np.empty((2, size), np.int64), np.empty((3, 3))
     clipped, witnessed = set(), set()
@@ -177,20 +186,7 @@ def test_polygon_witness_changes_no_answer(kind, reach, monkeypatch):
     version run with the shortcut off), with and without the ``inside`` cut of the removal
     loop, on generic points and on a grid full of exact ties."""
     rng = np.random.default_rng(11)
-    if kind == "cube":
-        X = rng.random((300, 3))
-    elif kind == "sphere":
-        X = _sphere(rng, 300)
-    else:
-        X = np.stack(np.meshgrid(*[np.arange(7.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
-        X = X[rng.random(len(X)) < 0.8] * 0.001 + 1000.0
-    X = X - X.mean(0)
-    if np.isfinite(reach):
-        reach *= np.median(cKDTree(X).query(X, k=2)[0][:, 1])
-    D = voronoi.scale_of(X)
-    half, tol = voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D
-    edges, _ = voronoi.candidate_edges(X, reach)
-    start, cnt, cap, pool, meta = adjacency.from_edges(len(X), edges, slack=0)
+    X, reach, half, tol, _, (start, cnt, cap, pool, meta) = _candidates(kind, 300, 7, rng, reach)
     # constraints as the removal loop gives them: a's list plus the two-ring of a (so that
     # many facets meet more than CENTROID_AFTER constraints)
     size = 2 * cnt.max() ** 2 + 5
