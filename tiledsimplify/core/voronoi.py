@@ -176,6 +176,7 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
     e2[2] = u0 * e1[1] - u1 * e1[0]
     mx, my, mz = 0.5 * dx, 0.5 * dy, 0.5 * dz
     rw = half - 5.0 * tol  # a witness this near the midpoint is inside the square and disc
+    # (none if the reach disc is thinner than that: a, b almost twice the reach apart)
     until = CENTROID_AFTER if inside >= 0 else -1  # constraints left before the next try
     n = square(half, xa, ya, la)
     cur = 0  # which buffer holds the polygon
@@ -232,7 +233,7 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
                 cx, cy = _vertex_mean(n, xa, ya)
             else:
                 cx, cy = _vertex_mean(n, xb, yb)
-            if cx * cx + cy * cy < rw * rw and _deep_inside(
+            if rw > 0.0 and cx * cx + cy * cy < rw * rw and _deep_inside(
                     X, a, b, cand, k + 1, ncand, inside, mx + cx * e1[0] + cy * e2[0],
                     my + cx * e1[1] + cy * e2[1], mz + cx * e1[2] + cy * e2[2], tol):
                 return True
