@@ -79,6 +79,11 @@ def test_adjacency_append_remove_and_growth():
     assert not adjacency.remove(start, cnt, pool, 1, 0)
     assert adjacency.contains(start, cnt, pool, 1, 2)
     assert not adjacency.contains(start, cnt, pool, 1, 0)
+    # removal keeps the order of the others (the lists stay sorted nearest first)
+    for j in (50, 0, 99, 7):
+        assert adjacency.remove(start, cnt, pool, 3, j)
+    assert pool[start[3]:start[3] + cnt[3]].tolist() == [
+        j for j in range(100) if j not in (50, 0, 99, 7)]
 
 
 def test_heap_pops_in_key_order_with_updates():

@@ -89,6 +89,12 @@ def test_maintained_state_equals_recomputation(kind, measure, reach):
                               weight, imp_f)
     for i, p in enumerate(keep):
         assert vn_m[p] == {int(keep[j]) for j in vn_f[i]}, p
+        # the lists stay sorted nearest first, ties by index (local_mesh sorts in place, a
+        # removal keeps the order): what keeps the sorts in the loop cheap
+        lst = st.pool[st.start[p]:st.start[p] + st.cnt[p]].tolist()
+        e = X[lst] - X[p]
+        d2 = e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1] + e[:, 2] * e[:, 2]
+        assert lst == [q for _, q in sorted(zip(d2.tolist(), lst))], p
         dn_m = st.dn[p, : st.dn_cnt[p]].tolist()
         dn_f = keep[fresh.dn[i, : fresh.dn_cnt[i]]].tolist()
         assert dn_m == dn_f, p

@@ -3,7 +3,9 @@
 The Voronoi neighbourhoods change under removal (a removed point's neighbours gain each other,
 paper §3.3), so each point owns a block ``pool[start[i] : start[i] + cap[i]]`` of which the first
 ``cnt[i]`` entries are used. A full block moves to the end of the pool with twice the capacity;
-a full pool doubles. Order inside a block is not meaningful.
+a full pool doubles. :func:`remove` keeps the order of the others and :func:`append` adds at
+the end; the order means nothing to the results, but :func:`.local_mesh.local_mesh` sorts a list
+nearest first in place, so lists stay (almost) sorted and its sort has little left to do.
 """
 
 import numpy as np
@@ -130,12 +132,14 @@ def contains(start, cnt, pool, i, j):
 
 @jit_inline
 def remove(start, cnt, pool, i, j):
-    """Remove ``j`` from the list of ``i`` (swap with the last entry). True if it was there."""
+    """Remove ``j`` from the list of ``i``, the later entries moving up one (the order stays).
+    True if it was there."""
     s = start[i]
     c = cnt[i]
     for k in range(c):
         if pool[s + k] == j:
-            pool[s + k] = pool[s + c - 1]
+            for t in range(s + k, s + c - 1):
+                pool[t] = pool[t + 1]
             cnt[i] = c - 1
             return True
     return False

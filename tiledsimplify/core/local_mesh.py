@@ -142,12 +142,15 @@ def _ratio(l1, l2):
 
 
 @jit
-def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame, stable):
+def local_mesh(X, p, nbr, m, out, fbufs, lbufs, normal0, frame, stable):
     """Select ``DN_p`` from the Voronoi neighbours ``nbr[:m]`` of ``p``; returns its size.
 
     The selected indices are written, sorted, to ``out``; the reference-plane normal to
-    ``normal0``. ``work`` is an int64 buffer and ``fbufs`` (5, >= m + 5) / ``lbufs``
-    (3, >= m + 5) / ``frame`` (2, 3) scratch.
+    ``normal0``. ``nbr[:m]`` is sorted in place, nearest first (ties by index): the neighbour
+    lists then stay sorted between updates (a removal keeps the order, a new neighbour comes
+    last), and the insertion sort here has almost nothing to move — 491 -> ~200 cycles a call
+    (cycle counters, 100k scan points). ``fbufs`` (5, >= m + 5) / ``lbufs`` (3, >= m + 5) /
+    ``frame`` (2, 3) are scratch.
 
     ``stable[0]`` is set to the number ``k`` of nearest neighbours the reference plane was
     fitted to when losing any other neighbour ``q`` cannot change ``DN_p`` or that plane, as
@@ -163,7 +166,7 @@ def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame, stable):
     if m == 0:
         normal0[0], normal0[1], normal0[2] = 0.0, 0.0, 1.0
         return 0
-    idx = work
+    idx = nbr
     d2 = fbufs[4]
     sort_by_distance(X, p, nbr, m, idx, d2)
     for j in range(3, m):
@@ -274,19 +277,18 @@ def local_mesh(X, p, nbr, m, out, work, fbufs, lbufs, normal0, frame, stable):
 @jit
 def all_local_meshes(X, start, cnt, pool, dn, dn_cnt, plane_normals, stable):
     """``DN_p`` for every point from the Voronoi-neighbour lists (see :func:`local_mesh`;
-    ``stable[p]``: its ``stable[0]``)."""
+    ``stable[p]``: its ``stable[0]``), sorting each list nearest first in place."""
     n = X.shape[0]
     maxdeg = 1
     for i in range(n):
         if cnt[i] > maxdeg:
             maxdeg = cnt[i]
-    work = np.empty(maxdeg, dtype=np.int64)
     fbufs = np.empty((5, maxdeg + 5))
     lbufs = np.empty((3, maxdeg + 5), dtype=np.int64)
     frame = np.empty((2, 3))
     for p in range(n):
         s = start[p]
-        dn_cnt[p] = local_mesh(X, p, pool[s:s + cnt[p]], cnt[p], dn[p], work, fbufs, lbufs,
+        dn_cnt[p] = local_mesh(X, p, pool[s:s + cnt[p]], cnt[p], dn[p], fbufs, lbufs,
                                plane_normals[p], frame, stable[p:p + 1])
 
 

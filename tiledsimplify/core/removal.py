@@ -108,7 +108,6 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     bufs = np.empty((4, 3 * buf + 5))
     lbufs = np.empty((2, 3 * buf + 5), dtype=np.int64)
     frame = np.empty((3, 3))
-    work = np.empty(buf, dtype=np.int64)
     fbufs = np.empty((5, buf + 5))
     mbufs = np.empty((3, buf + 5), dtype=np.int64)
     newdn = np.empty(MAX_DN, dtype=np.int64)
@@ -139,8 +138,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
                                bufs, lbufs, frame, mark)
         # -- 2. local meshes and normals of the first ring
         m = _max_count(cnt, link, k)
-        if m + 5 > fbufs.shape[1] or m > work.size:
-            work = np.empty(2 * m + 5, dtype=np.int64)
+        if m + 5 > fbufs.shape[1]:
             fbufs = np.empty((5, 2 * m + 10))
             mbufs = np.empty((3, 2 * m + 10), dtype=np.int64)
         for j in range(k):
@@ -156,7 +154,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
                                                    stable[a]):
                     mesh_changed[a] = False
                     continue  # the same DN_a and reference plane, so the same normal
-            c = local_mesh(X, a, pool[s:s + cnt[a]], cnt[a], newdn, work, fbufs, mbufs,
+            c = local_mesh(X, a, pool[s:s + cnt[a]], cnt[a], newdn, fbufs, mbufs,
                            nvec, frame[:2], stable[a:a + 1])
             same = c == dn_cnt[a]
             if same:
