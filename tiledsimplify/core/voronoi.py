@@ -582,7 +582,8 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
     # x through q holds p and no other point; shrunk towards q it meets p, so p and q share a
     # facet within the reach. The current neighbours of a beyond the link cut nothing there;
     # a test that found a facet used to clip them too (~20-24 constraints instead of the
-    # link's ~11-14). Same edges on every quality case and tie-rich grid tested.
+    # link's ~11-14; 10-17 % cheaper). Same ranks on 14 quality cases in both modes, and the
+    # maintained lists equal fresh ones in the tests (quantised, tie-rich clouds too).
     # Most pairs have no facet: the link goes nearest to p first, and for each pair the link
     # point nearest to its midpoint is moved to the front (see _nearest_to_midpoint_first),
     # so the clipped polygon empties after a few constraints.
