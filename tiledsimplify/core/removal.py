@@ -104,9 +104,9 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     normal_changed = np.zeros(n, dtype=np.bool_)
     buf = 64
     link = np.empty(buf, dtype=np.int64)
-    cand = np.empty(3 * buf, dtype=np.int64)
-    bufs = np.empty((4, 3 * buf + 5))
-    lbufs = np.empty((2, 3 * buf + 5), dtype=np.int64)
+    cand = np.empty(buf, dtype=np.int64)
+    bufs = np.empty((4, buf + 5))
+    lbufs = np.empty((2, buf + 5), dtype=np.int64)
     frame = np.empty((3, 3))
     fbufs = np.empty((5, buf + 5))
     mbufs = np.empty((3, buf + 5), dtype=np.int64)
@@ -125,12 +125,11 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
         at[step] = importance[p]
         # -- 1. Voronoi neighbourhoods
         k = cnt[p]
-        need = k + 2 * max(k, _max_count(cnt, pool[start[p]:start[p] + k], k)) + 8
-        if k > link.size or need > cand.size:
-            link = np.empty(2 * need, dtype=np.int64)
-            cand = np.empty(2 * need, dtype=np.int64)
-            bufs = np.empty((4, 2 * need + 5))
-            lbufs = np.empty((2, 2 * need + 5), dtype=np.int64)
+        if k > link.size:  # remove_point's buffers: the link is its constraints
+            link = np.empty(2 * k, dtype=np.int64)
+            cand = np.empty(2 * k, dtype=np.int64)
+            bufs = np.empty((4, 2 * k + 5))
+            lbufs = np.empty((2, 2 * k + 5), dtype=np.int64)
         for j in range(cnt[p]):
             q = pool[start[p] + j]
             before[q] = cnt[q]

@@ -565,9 +565,9 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
     returned); the pool may have moved, so the (possibly new) pool is returned too:
     ``(k, pool)``.
 
-    ``cand`` must have room for ``max degree + cnt[p]`` entries; ``bufs`` (4, m) and
-    ``lbufs`` (2, m) are clipping scratch with ``m >= len(cand) + 5``. ``mark`` (int64, one
-    entry per point, all ``-1``) is scratch too; it is left all ``-1``.
+    ``cand`` must have room for ``cnt[p]`` entries (the constraints: the link); ``bufs``
+    (4, m) and ``lbufs`` (2, m) are clipping scratch with ``m >= cnt[p] + 5``. ``mark``
+    (int64, one entry per point, all ``-1``) is scratch too; it is left all ``-1``.
     """
     s = start[p]
     k = cnt[p]
@@ -593,15 +593,10 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
         cand[j] = link[j]
     for ia in range(k):
         a = link[ia]
-        # cand[k:k + na] is the list of a, kept in step as a gains neighbours below (append
-        # keeps the order; the pool may move); mark[q] == a flags its members, for the
-        # "already neighbours" test
+        # mark[q] == a flags the neighbours of a, for the "already neighbours" test
         sa = start[a]
-        na = cnt[a]
-        for j in range(na):
-            q = pool[sa + j]
-            cand[k + j] = q
-            mark[q] = a
+        for j in range(cnt[a]):
+            mark[pool[sa + j]] = a
         for ib in range(ia + 1, k):
             b = link[ib]
             if mark[b] == a:
@@ -615,9 +610,8 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
                               bufs[0], bufs[1], lbufs[0], bufs[2], bufs[3], lbufs[1], frame, p):
                 pool = adjacency.append(start, cnt, cap, pool, meta, a, b)
                 pool = adjacency.append(start, cnt, cap, pool, meta, b, a)
-                cand[k + na] = b
                 mark[b] = a
-                na += 1
-        for j in range(na):
-            mark[cand[k + j]] = -1
+        sa = start[a]  # a's list as it is now (it may have moved as it grew)
+        for j in range(cnt[a]):
+            mark[pool[sa + j]] = -1
     return k, pool
