@@ -188,10 +188,10 @@ def test_polygon_witness_changes_no_answer(kind, reach, monkeypatch):
     some of them."""
     rng = np.random.default_rng(11)
     X, reach, half, tol, _, (start, cnt, cap, pool, meta) = _candidates(kind, 300, 7, rng, reach)
-    # as the removal of p tests a pair (a, b) of its former neighbours: the constraints are
-    # p's list and a's, without p, and the facet is cut to p's old cell; and the same pair
-    # with no cut (no tries then). The cut makes most facets positive in few constraints'
-    # reach, so that the tries have work to do.
+    # as the removal of p tests a pair (a, b) of its former neighbours, the facet cut to p's
+    # old cell; and the same pair with no cut (no tries then). The constraints are p's list
+    # (all the removal uses now) and a's, without p: the longer lists give the tries, which
+    # come every CENTROID_AFTER constraints, more chances to prove a facet.
     size = 2 * cnt.max() + 5
     bufs, lbufs, frame = np.empty((4, size)), np.empty((2, size), np.int64), np.empty((3, 3))
     args = []
