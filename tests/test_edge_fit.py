@@ -5,6 +5,7 @@ import pytest
 
 from tiledsimplify import SimplifyOptions, metrics, simplify_points, synthetic
 from tiledsimplify.core import edge_fit
+from tiledsimplify.core.linalg import add_moments
 from tiledsimplify.core.simplify import neighbourhoods, scale_of
 from tiledsimplify.io import read_mesh
 
@@ -165,6 +166,32 @@ def test_sweep_seed_is_the_best_line_split(seed):
     _, t1, t2 = frame  # the mean-plane frame the sweep used
     naive = _naive_best_line_split(X, t1, t2, edge_fit.NDIR, least)
     np.testing.assert_allclose(_split_sse(X, side), naive, rtol=1e-7, atol=1e-12)
+
+
+@pytest.mark.parametrize("shape", ["plane", "line", "blob", "flat"])
+def test_scatter_floor_bounds_the_least_eigenvalue(shape):
+    """The sweep skips a split's eigenvalues when this bound already rules it out: it must never
+    exceed the least eigenvalue, and on points spread in a plane it must be close to it."""
+    rng = np.random.default_rng(3)
+    scale = {"plane": [1.0, 0.7, 0.02], "line": [1.0, 0.03, 0.02], "blob": [1.0, 0.8, 0.6],
+             "flat": [1.0, 0.5, 0.0]}[shape]
+    for _ in range(200):
+        k = int(rng.integers(3, 40))
+        P = rng.normal(size=(k + 1, 3)) * scale @ np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        P += rng.normal(size=3) * 5.0
+        X = np.ascontiguousarray(P)
+        m = (0.0,) * 9
+        for q in range(1, k + 1):  # moments of points 1..k about point 0, as the sweep sums
+            m = add_moments(m, X, q, X[0, 0], X[0, 1], X[0, 2])
+        low, trace = edge_fit._scatter_floor(m, k)
+        exact = edge_fit._smallest_scatter(m, k)
+        q = P[1:] - P[1:].mean(0)
+        reference = max(np.linalg.eigvalsh(q.T @ q)[0], 0.0)
+        assert exact == pytest.approx(reference, abs=1e-9 * trace)
+        assert low <= exact + 1e-9 * trace
+        assert trace == pytest.approx(np.trace(q.T @ q), rel=1e-9)
+        if shape == "plane" and exact > 1e-6 * trace:  # (three points lie in a plane exactly)
+            assert low >= 0.9 * exact
 
 
 def test_sweep_seed_separates_the_faces_of_a_ridge():
