@@ -168,13 +168,13 @@ def test_sweep_seed_is_the_best_line_split(seed):
     np.testing.assert_allclose(_split_sse(X, side), naive, rtol=1e-7, atol=1e-12)
 
 
-@pytest.mark.parametrize("shape", ["plane", "line", "blob", "flat"])
+@pytest.mark.parametrize("shape", ["plane", "line", "blob", "flat", "exact line"])
 def test_scatter_floor_bounds_the_least_eigenvalue(shape):
     """The sweep skips a split's eigenvalues when this bound already rules it out: it must never
     exceed the least eigenvalue, and on points spread in a plane it must be close to it."""
     rng = np.random.default_rng(3)
     scale = {"plane": [1.0, 0.7, 0.02], "line": [1.0, 0.03, 0.02], "blob": [1.0, 0.8, 0.6],
-             "flat": [1.0, 0.5, 0.0]}[shape]
+             "flat": [1.0, 0.5, 0.0], "exact line": [1.0, 0.0, 0.0]}[shape]
     for _ in range(200):
         k = int(rng.integers(3, 40))
         P = rng.normal(size=(k + 1, 3)) * scale @ np.linalg.qr(rng.normal(size=(3, 3)))[0]

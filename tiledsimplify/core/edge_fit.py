@@ -238,8 +238,11 @@ def _scatter_floor(m, k):
 
     ``λ0 = det / (λ1 λ2) >= det / (λ0 λ1 + λ0 λ2 + λ1 λ2)``: the denominator is the sum of the
     principal 2x2 minors, so no eigenvalue is needed. For points spread in a plane (``λ0`` small
-    against ``λ1``, ``λ2``), as the halves of a sweep mostly are, the bound is ``λ0`` within
-    ``λ0 (λ1 + λ2) / (λ1 λ2)``, so nearly every split that cannot beat the best is ruled out.
+    against ``λ1``, ``λ2``), as the halves of a sweep mostly are, the bound falls short of
+    ``λ0`` only by the factor ``1 + λ0 (λ1 + λ2) / (λ1 λ2)``, so nearly every split that cannot
+    beat the best is ruled out. Where the minors are below ``1e-6`` of the squared trace (the
+    points nearly on a line) their rounding could make the quotient anything: the bound is 0
+    there. Elsewhere its rounding is below ~1e-9 of the trace, far inside ``FLOOR_MARGIN``.
     """
     sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = m
     a00, a01, a02 = sxx - sx * sx / k, sxy - sx * sy / k, sxz - sx * sz / k
@@ -250,7 +253,7 @@ def _scatter_floor(m, k):
     minors = m00 + m11 + m22
     det = a00 * m00 - a01 * (a01 * a22 - a12 * a02) + a02 * (a01 * a12 - a11 * a02)
     trace = a00 + a11 + a22
-    if minors <= 0.0 or det <= 0.0:
+    if det <= 0.0 or not minors > 1e-6 * trace * trace:
         return 0.0, max(trace, 0.0)
     return det / minors, trace
 
