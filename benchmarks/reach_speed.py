@@ -60,7 +60,7 @@ def main(argv=None):
                 for k, v in row.items():
                     b[k] = min(b.get(k, v), v)
                 b["kept"], b["flagged"] = int(res.keep.sum()), int(res.boundary.sum())
-                b["degree"] = res.stats.get("mean_voronoi_degree", float("nan"))
+                b["degree"] = res.stats["mean_voronoi_degree"]
         for r in reaches:
             b = best[r]
             print(f"| {spec} | {len(X):,} | {r:g} | {b['degree']:.2f} | {b['total']:.2f} "

@@ -34,7 +34,7 @@ DESIGN.md §4 — whatever the noise and the scan-line anisotropy.
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .boundary import deviation_at
 from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covariance,
                      orient_canonical, smallest_axis, sym3_eigvals, tangent_basis)
@@ -215,25 +215,33 @@ def _seed_by_normals(normals, idx, c, side):
         side[j] = 0 if da >= db else 1
 
 
-@jit
-def _smallest_scatter(m, k):
-    """Least eigenvalue of the scatter matrix of ``k`` points with running moments ``m``
-    (:data:`.linalg.NO_MOMENTS`): their sum of squared distances to their best plane."""
+@jit_inline
+def _scatter(m, k):
+    """The scatter matrix ``(a00, a01, a02, a11, a12, a22)`` of ``k`` points with running
+    moments ``m`` (:data:`.linalg.NO_MOMENTS`)."""
     sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = m
-    l0, _, _ = sym3_eigvals(sxx - sx * sx / k, sxy - sx * sy / k, sxz - sx * sz / k,
-                            syy - sy * sy / k, syz - sy * sz / k, szz - sz * sz / k)
+    return (sxx - sx * sx / k, sxy - sx * sy / k, sxz - sx * sz / k,
+            syy - sy * sy / k, syz - sy * sz / k, szz - sz * sz / k)
+
+
+@jit
+def _smallest_scatter(a00, a01, a02, a11, a12, a22):
+    """Least eigenvalue of a scatter matrix (:func:`_scatter`): the points' sum of squared
+    distances to their best plane."""
+    l0, _, _ = sym3_eigvals(a00, a01, a02, a11, a12, a22)
     return max(l0, 0.0)
 
 
 #: :func:`_seed_by_sweep` computes a split's eigenvalues only if its lower bound
 #: (:func:`_scatter_floor`) falls short of the best so far plus this fraction of the two halves'
-#: traces — far above the rounding of the bound and of the trigonometric eigenvalues (good to
-#: ~1e-8 of the trace where two of them nearly tie), so the split chosen is the same
+#: traces. Estimated, not measured: that is far above the rounding of the bound (see there) and
+#: of the trigonometric eigenvalues (about sqrt(machine epsilon), 1e-8, of the trace where two
+#: of them nearly tie), so the split chosen is the same
 FLOOR_MARGIN = 1e-6
 
 
 @jit
-def _scatter_floor(m, k):
+def _scatter_floor(a00, a01, a02, a11, a12, a22):
     """A lower bound on :func:`_smallest_scatter` without eigenvalues, and the scatter's trace.
 
     ``λ0 = det / (λ1 λ2) >= det / (λ0 λ1 + λ0 λ2 + λ1 λ2)``: the denominator is the sum of the
@@ -242,11 +250,10 @@ def _scatter_floor(m, k):
     ``λ0`` only by the factor ``1 + λ0 (λ1 + λ2) / (λ1 λ2)``, so nearly every split that cannot
     beat the best is ruled out. Where the minors are below ``1e-6`` of the squared trace (the
     points nearly on a line) their rounding could make the quotient anything: the bound is 0
-    there. Elsewhere its rounding is below ~1e-9 of the trace, far inside ``FLOOR_MARGIN``.
+    there. Elsewhere the determinant's rounding (a few machine epsilons of the cubed trace)
+    over minors of at least ``1e-6`` of its square stays near 1e-9 of the trace (an estimate),
+    far inside ``FLOOR_MARGIN``.
     """
-    sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = m
-    a00, a01, a02 = sxx - sx * sx / k, sxy - sx * sy / k, sxz - sx * sz / k
-    a11, a12, a22 = syy - sy * sy / k, syz - sy * sz / k, szz - sz * sz / k
     m00 = a11 * a22 - a12 * a12
     m11 = a00 * a22 - a02 * a02
     m22 = a00 * a11 - a01 * a01
@@ -289,12 +296,14 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work):
             right = (total[0] - left[0], total[1] - left[1], total[2] - left[2],
                      total[3] - left[3], total[4] - left[4], total[5] - left[5],
                      total[6] - left[6], total[7] - left[7], total[8] - left[8])
+            scatter_l = _scatter(left, k)
+            scatter_r = _scatter(right, c - k)
             # most splits cannot beat the best: a bound without eigenvalues rules them out
-            low_l, trace_l = _scatter_floor(left, k)
-            low_r, trace_r = _scatter_floor(right, c - k)
+            low_l, trace_l = _scatter_floor(*scatter_l)
+            low_r, trace_r = _scatter_floor(*scatter_r)
             if low_l + low_r >= best + FLOOR_MARGIN * (trace_l + trace_r):
                 continue
-            sse = _smallest_scatter(left, k) + _smallest_scatter(right, c - k)
+            sse = _smallest_scatter(*scatter_l) + _smallest_scatter(*scatter_r)
             if sse < best:
                 best, best_d, best_k = sse, d, k
     _project(X, idx, c, p, t1, t2, np.pi * best_d / NDIR, proj)

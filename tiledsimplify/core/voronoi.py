@@ -144,17 +144,14 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
     tries the midpoint: if it lies ``4 tol`` inside every constraint (checked by one dot
     product each, no clipping) and within ``half - 5 tol`` of the midpoint, a disc of radius
     ``3 tol`` around it survives all the clipping, so the facet is positive. No try after the
-    last constraint: the area test is cheaper then. A test that finds a facet used to clip
-    all its ~20-24 constraints; it is now 32-37 % cheaper, a test that finds none 0-3 %
-    dearer (failed tries), the facet tests of the removal loop 9-13 % cheaper in all (cycle
-    counters, medians of 5-6 paired runs: 49.7k -> 43.4k cycles per removal on 36k
-    Bunny-range points, 32.6k -> 29.7k on 100k scan points). In the initial filter the
-    polygon is still the whole reach disc after six cuts and the tries saved nothing: off.
-    The answer is the clipping's (tested against the clipping alone on tie-rich grids).
-    Those figures predate the removal's link-only constraints (:func:`remove_point`, ~11-14
-    instead of ~20-24): with them, on against off measured within noise (positive tests
-    1.72k vs 1.74-1.83k TSC ticks on 100k scan points, 1.84-1.93k vs 1.86-1.98k on 36k
-    Bunny-range points, 2 paired runs); the tries stay, as they cost nothing either.
+    last constraint: the area test is cheaper then. The answer is the clipping's (tested
+    against the clipping alone on tie-rich grids). The tries made the removal loop's facet
+    tests 9-13 % cheaper when a test clipped ~20-24 constraints; with the link-only
+    constraints of :func:`remove_point` (~11-14) on against off measured within noise
+    (positive tests 1.72k vs 1.74-1.83k TSC ticks on 100k scan points, 2 paired runs), so
+    they stay only because they cost nothing either (README "Known limits"). In the initial
+    filter the polygon is still the whole reach disc after six cuts and the tries saved
+    nothing: off there.
 
     ``xa, ya, la, xb, yb, lb`` are scratch buffers of length at least ``ncand + 5``; ``frame``
     is a (3, 3) scratch array.
