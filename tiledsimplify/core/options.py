@@ -20,8 +20,9 @@ MODES = ("coverage", "paper")
 COVERAGE = 3.0
 #: mode "coverage": default reach of the Voronoi neighbourhoods, in spacings. 12 instead of 20
 #: (2026-11-23): mean Voronoi degree 13.9 -> ~12 on the Bunny, and the removal's facet tests
-#: go with the square of the link; whole calls 14-18 % faster (the Bunny at 10 % 1.91-2.00 ->
-#: 1.60-1.64 s, 100k scan points 4.18-4.24 -> 3.58-3.61 s, paired). On the 37 quality cases:
+#: go with the square of the link; whole calls 12-18 % faster (``benchmarks/reach_speed.py``,
+#: fastest of 3: the Bunny at 10 % 1.97 -> 1.62 s, 100k scan points 4.15 -> 3.53 s, 36k
+#: Bunny-range points 1.77 -> 1.55 s). On the 37 quality cases:
 #: every target count as at 20 (mean error below every peer on one case more), geometric
 #: means of mean error 1.000, Hausdorff 0.998, edge coverage 0.997, F1 0.997. 10 was faster
 #: still (the Bunny 1.52 s) but cost the line scans 1-2 points of edge coverage (their
