@@ -5,7 +5,7 @@ import pytest
 
 from tiledsimplify import SimplifyOptions, metrics, simplify_points, synthetic
 from tiledsimplify.core import edge_fit
-from tiledsimplify.core.linalg import add_moments
+from tiledsimplify.core.linalg import NO_MOMENTS, add_moments
 from tiledsimplify.core.simplify import neighbourhoods, scale_of
 from tiledsimplify.io import read_mesh
 
@@ -180,7 +180,7 @@ def test_scatter_floor_bounds_the_least_eigenvalue(shape):
         P = rng.normal(size=(k + 1, 3)) * scale @ np.linalg.qr(rng.normal(size=(3, 3)))[0]
         P += rng.normal(size=3) * 5.0
         X = np.ascontiguousarray(P)
-        m = (0.0,) * 9
+        m = NO_MOMENTS
         for q in range(1, k + 1):  # moments of points 1..k about point 0, as the sweep sums
             m = add_moments(m, X, q, X[0, 0], X[0, 1], X[0, 2])
         low, trace = edge_fit._scatter_floor(*edge_fit._scatter(m, k))
