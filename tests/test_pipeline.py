@@ -219,6 +219,35 @@ def test_same_output_for_every_scheduler(bunny, tmp_path, cluster, caplog):
     assert len(set(outs.values())) == 1
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_tiles_start_largest_first_and_refine_after_their_earlier_neighbours(
+        bunny, tmp_path, caplog, workers):
+    # longest processing time first: with one worker the tiles finish in the order they
+    # start, which must be largest first (the key names steer dask's order); a refined tile
+    # is logged after every neighbour of an earlier phase, whose flags it reads
+    from tiledsimplify.pipeline.tile_refine import refine_phases
+    X, path = bunny
+    store = tmp_path / "store"
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        s = run(path, tmp_path / "out.npy", ratio=0.2, tile_points=700, store=store,
+                workers=workers)
+    ts = TileStore.open(store)
+    counts = ts.tile_counts
+    assert s.refined and ts.n_tiles >= 8 and len(set(counts.tolist())) > 2
+    lines = [r.getMessage() for r in caplog.records]
+    done = [int(m.split()[1]) for m in lines if m.startswith("tile ")]
+    refined = [int(m.split()[2]) for m in lines if m.startswith("refined tile ")]
+    assert sorted(done) == sorted(refined) == list(range(ts.n_tiles))
+    if workers == 1:
+        assert list(counts[done]) == sorted(counts[done], reverse=True), (done, counts)
+    phase = refine_phases(ts.plan, ts.halo)
+    at = {t: k for k, t in enumerate(refined)}
+    for i in range(ts.n_tiles):
+        for j in ts.neighbours(i):
+            if phase[j] < phase[i]:
+                assert at[j] < at[i], (i, j, refined)
+
+
 def test_resume_finishes_the_remaining_tiles(bunny, tmp_path, caplog):
     X, path = bunny
     store = tmp_path / "store"

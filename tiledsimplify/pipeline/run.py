@@ -16,6 +16,7 @@ import math
 import sys
 import tempfile
 import time
+import uuid
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -153,6 +154,28 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
             return list(dask.compute(*tasks, **kw))
     finally:
         report.close()
+
+
+def _tile_tasks(func, tiles, weight, args, after=None):
+    """One dask task ``func(*args(i))`` per tile, named so that the heaviest start first.
+
+    Ready tasks of equal standing run in reverse order of their keys (``dask.order``, which
+    the local schedulers and dask.distributed both follow; ``tests/test_pipeline.py`` checks
+    it), so each key counts up with the tile's ``weight``. Tiles of unequal size then finish
+    together: the last one to run is a small one, not a large one started last while the
+    other workers idle (longest processing time first). ``after(i)``: tasks that tile ``i``'s
+    must follow (passed as the keyword ``after``, which ``func`` ignores).
+    """
+    tiles = [int(i) for i in tiles]
+    rank = np.argsort(np.argsort([weight(i) for i in tiles], kind="stable"), kind="stable")
+    token = uuid.uuid4().hex  # fresh keys: a cluster never reuses another run's results
+    name = func.__name__.replace("_", "-")
+    tasks = {}
+    for i, r in zip(tiles, rank.tolist()):
+        kw = {} if after is None else {"after": [tasks[j] for j in after(i) if j in tasks]}
+        tasks[i] = dask.delayed(func, pure=False)(
+            *args(i), **kw, dask_key_name=f"{name}-{r:07d}-{i}-{token}")
+    return list(tasks.values())
 
 
 def _tile_line(result, done, total):
@@ -296,9 +319,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if threshold is None:
             threshold = ts.run_attrs.get("threshold")
         if threshold is None and options.detect_boundary and options.mode == "paper":
-            done = _compute([dask.delayed(deviation_histogram)(str(store_path), i, opts)
-                             for i in range(ts.n_tiles)], scheduler, workers, client, progress,
-                            "neighbours", _threshold_line)
+            done = _compute(_tile_tasks(deviation_histogram, range(ts.n_tiles), ts.count,
+                                        lambda i: (str(store_path), i, opts)),
+                            scheduler, workers, client, progress, "neighbours", _threshold_line)
             threshold = threshold_from_histogram(np.sum([d["hist"] for d in done], axis=0),
                                                  options.boundary_k, options.boundary_floor)
             ts.set_run_attrs({"threshold": threshold})
@@ -311,9 +334,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         thr = threshold if options.detect_boundary else None
         keep_fraction = float(floor) * target / n if n else 0.0
         if pending:
-            _compute([dask.delayed(simplify_tile)(
-                str(store_path), i, opts, thr,
-                ("keep", math.ceil(keep_fraction * ts.count(i)))) for i in pending],
+            _compute(_tile_tasks(simplify_tile, pending, ts.count, lambda i: (
+                str(store_path), i, opts, thr, ("keep", math.ceil(keep_fraction * ts.count(i))))),
                 scheduler, workers, client, progress, "tiles", _tile_line)
             log.info("simplified %d tiles in %.1f s", len(pending), time.perf_counter() - clock[0])
         stage("tiles")
@@ -329,9 +351,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             n_deeper += len(need)
             log.info("the global cut reaches past the floor of %d tile(s): running them deeper",
                      len(need))
-            _compute([dask.delayed(simplify_tile)(str(store_path), i, opts, thr,
-                                                  ("level", need[i])) for i in sorted(need)],
-                     scheduler, workers, client, progress, "deeper", _tile_line)
+            _compute(_tile_tasks(simplify_tile, sorted(need), ts.count, lambda i: (
+                str(store_path), i, opts, thr, ("level", need[i]))),
+                scheduler, workers, client, progress, "deeper", _tile_line)
         else:
             raise TiledSimplifyError(
                 f"{store_path}: the tiles' removal sequences do not agree between passes (the "
@@ -379,9 +401,9 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
     """The gap refinement stage (:mod:`.tile_refine`); True if the tiles were refined.
 
     One task per tile for the cut's Hausdorff distance ``G`` per tile (refinement needs ``G``
-    within the halo), then the refinement in phases (:func:`refine_phases`): one compute per
-    phase, its tiles in parallel, each reading the refined flags of its neighbours from
-    earlier phases. The cut, its key and ``G`` are saved in the store, and each tile's refined
+    within the halo), then the refinement in phases (:func:`refine_phases`): one graph in which
+    each tile waits for its neighbours of earlier phases, whose refined flags it reads; the
+    rest run in parallel, largest first (:func:`_tile_tasks`). The cut, its key and ``G`` are saved in the store, and each tile's refined
     flags with the key and ``G``, so a resumed run refines only the tiles still missing for
     this cut (flags are a fixed function of the cut, so those saved stay valid).
     """
@@ -392,9 +414,9 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
         ts.set_run_attrs({"cut": cut, "cut_key": key, "cut_hausdorff": None})
     g = ts.run_attrs.get("cut_hausdorff")
     if g is None:
-        done = _compute([dask.delayed(cut_hausdorff)(str(store_path), i)
-                         for i in range(ts.n_tiles)], scheduler, workers, client, progress,
-                        "gaps")
+        done = _compute(_tile_tasks(cut_hausdorff, range(ts.n_tiles), ts.count,
+                                    lambda i: (str(store_path), i)),
+                        scheduler, workers, client, progress, "gaps")
         g = max(d["hausdorff"] for d in done)
         if not g <= ts.halo:
             log.warning("no gap refinement: the cut leaves points %.4g from the nearest kept "
@@ -404,17 +426,15 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
         ts.set_run_attrs({"cut_hausdorff": g})
     phase = refine_phases(ts.plan, ts.halo)
     n_phases = int(phase.max()) + 1 if len(phase) else 0
-    n_done = 0
-    for p in range(n_phases):
-        pending = [i for i in np.flatnonzero(phase == p).tolist()
-                   if not is_refined(ts, i, key, g)]
-        if not pending:
-            continue
-        earlier = {i: [int(j) for j in ts.neighbours(i) if phase[j] < p] for i in pending}
-        _compute([dask.delayed(refine_tile)(str(store_path), i, g, earlier[i])
-                  for i in pending], scheduler, workers, client, progress,
-                 f"refine {p + 1}/{n_phases}", _refine_line)
-        n_done += len(pending)
+    # a tile waits for its neighbours of earlier phases alone, not for every earlier tile
+    earlier = {i: [int(j) for j in ts.neighbours(i) if phase[j] < phase[i]]
+               for i in range(ts.n_tiles)}
+    pending = [i for i in range(ts.n_tiles) if not is_refined(ts, i, key, g)]
+    n_done = len(pending)
+    if pending:
+        _compute(_tile_tasks(refine_tile, sorted(pending, key=lambda i: phase[i]), ts.count,
+                             lambda i: (str(store_path), i, g, earlier[i]), earlier.get),
+                 scheduler, workers, client, progress, "refine", _refine_line)
     log.info("refined %d tiles in %d phases (cut Hausdorff %.4g) in %.1f s", n_done, n_phases,
              g, time.perf_counter() - t0)
     return True

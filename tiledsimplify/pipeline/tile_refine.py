@@ -8,9 +8,11 @@ refines after the global cut, one task per tile, in two stages:
    kept points of core and halo). Their maximum ``G`` is the cut's global Hausdorff distance;
    refinement needs ``G`` at most the halo width (below).
 2. :func:`refine_tile`, in **phases** (:func:`refine_phases`): a greedy colouring, by tile
-   index, of the graph that joins two tiles when one's halo reaches the other's core. Phases
-   run one after another, the tiles of a phase in parallel. A tile sees its halo as the tiles
-   of earlier phases refined it and the rest as the cut left it, and runs ``refine_coverage``
+   index, of the graph that joins two tiles when one's halo reaches the other's core. A tile
+   starts once its neighbours of earlier phases are refined (not every tile of earlier phases:
+   no barrier between phases), so tiles of one phase, and of different phases that are not
+   neighbours, run in parallel. A tile sees its halo as the tiles of earlier phases refined it
+   and the rest as the cut left it, and runs ``refine_coverage``
    on core ∪ halo: only core points are added or removed (each tile keeps its count, so the
    global count stays exact), only core points count in its Hausdorff distance and are
    filled for, kept halo points and the core's boundary and protected points stay
@@ -18,17 +20,18 @@ refines after the global cut, one task per tile, in two stages:
    removed halo points are *watched*: a round at level ``τ`` leaves none farther than
    ``max(τ, its distance before)``.
 
-**Determinism.** Two tiles of one phase do not see each other's points (not neighbours), so a
-tile reads only facts fixed before its phase starts: the cut and the refined flags of earlier
-phases. The phases are a fixed function of the tile plan and the halo. So each tile's flags are
-a fixed function of the cut, whatever the scheduler, worker count or the order within a phase,
-and a resumed run may keep every tile already refined for the same cut.
+**Determinism.** A tile reads the cut and the refined flags of its neighbours of earlier
+phases, which are saved before it starts; its neighbours of later phases start only after it
+ends, and tiles that run beside it are not its neighbours (they do not see each other's
+points). The phases are a fixed function of the tile plan and the halo. So each tile's flags
+are a fixed function of the cut, whatever the scheduler, worker count or order, and a resumed
+run may keep every tile already refined for the same cut.
 
 **Safety.** A tile removes a point ``c`` only if every point whose nearest kept point is ``c``
 keeps another within ``τ`` (or, for a watched point farther than ``τ``, not at all). That point
 lies within ``G`` of ``c`` (no distance ever exceeds ``G``: each round aims below the tile's
 Hausdorff distance), so within the halo: the tile sees it and every kept point it sees is really
-kept while it runs. Points another tile of the same phase removes are not in its view, so no
+kept while it runs. Points a tile running beside it removes are not in its view, so no
 two tiles remove the two points a point relies on. Hence no point ends farther than ``G``: the
 output's Hausdorff distance is never above the cut's.
 
@@ -114,7 +117,7 @@ def cut_hausdorff(store_path, tile):
     return {"tile": int(tile), "hausdorff": h, "seconds": time.perf_counter() - t0}
 
 
-def refine_tile(store_path, tile, hausdorff, earlier=()):
+def refine_tile(store_path, tile, hausdorff, earlier=(), after=()):
     """Refine one tile's kept core points after the global cut; save them in the store.
 
     Parameters
@@ -127,6 +130,9 @@ def refine_tile(store_path, tile, hausdorff, earlier=()):
     earlier : sequence of int
         The neighbours of ``tile`` in earlier phases: their refined flags are read (they must
         be saved), the cut's for every other neighbour.
+    after : sequence, ignored
+        The scheduler's handle on the tasks that refine ``earlier`` (their results), so that
+        this one runs after them.
 
     Returns
     -------
