@@ -403,9 +403,10 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
     One task per tile for the cut's Hausdorff distance ``G`` per tile (refinement needs ``G``
     within the halo), then the refinement in phases (:func:`refine_phases`): one graph in which
     each tile waits for its neighbours of earlier phases, whose refined flags it reads; the
-    rest run in parallel, largest first (:func:`_tile_tasks`). The cut, its key and ``G`` are saved in the store, and each tile's refined
-    flags with the key and ``G``, so a resumed run refines only the tiles still missing for
-    this cut (flags are a fixed function of the cut, so those saved stay valid).
+    rest run in parallel, largest first (:func:`_tile_tasks`). The cut, its key and ``G`` are
+    saved in the store, and each tile's refined flags with the key and ``G``, so a resumed run
+    refines only the tiles still missing for this cut (flags are a fixed function of the cut,
+    so those saved stay valid).
     """
     t0 = time.perf_counter()
     cut = [int(prefix[i]) for i in range(ts.n_tiles)]
