@@ -162,10 +162,10 @@ def _tile_tasks(func, tiles, weight, args, after=None):
     Ready tasks of equal standing run in reverse order of their keys (``dask.order``, which
     the local schedulers and dask.distributed both follow: ``tests/test_pipeline.py`` checks
     the threaded scheduler; a one-worker ``LocalCluster`` ran ten tasks highest key first,
-    dask 2026.8), so each key counts up with the tile's ``weight``. Tiles of unequal size then finish
-    together: the last one to run is a small one, not a large one started last while the
-    other workers idle (longest processing time first). ``after(i)``: tasks that tile ``i``'s
-    must follow (passed as the keyword ``after``, which ``func`` ignores).
+    dask 2026.8), so each key counts up with the tile's ``weight``. Tiles of unequal size
+    then finish together: the last one to run is a small one, not a large one started last
+    while the other workers idle (longest processing time first). ``after(i)``: tasks that
+    tile ``i``'s must follow (passed as the keyword ``after``, which ``func`` ignores).
     """
     tiles = [int(i) for i in tiles]
     rank = np.argsort(np.argsort([weight(i) for i in tiles], kind="stable"), kind="stable")
