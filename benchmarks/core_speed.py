@@ -1,6 +1,8 @@
 """Speed and memory of the in-memory core against the library calls it is built from.
 
-Each case runs in its own process (peak RSS is per process). Peers timed in the same process:
+Each case runs in its own process. The core runs first after the JIT is warmed and the cloud
+loaded, so the peak RSS read right after it is the core's own; the table gives it and the bytes
+per input point above the RSS before the call. Peers timed in the same process, after it:
 scipy's Qhull 3-D Delaunay and a cKDTree 17-nearest query on the same points — the two library
 calls a per-point neighbourhood method cannot avoid — so the table reads as ratios that hold
 across machines; and the core's own Delaunay (:mod:`tiledsimplify.core.delaunay`, which
@@ -63,6 +65,13 @@ def one(kind, n):
     simplify_points(cloud("flat", 2000), ratio=0.2)  # warm the JIT
     X = cloud(kind, n)
     n = len(X)
+    # the core first, so that the process's high-water mark read right after it is the core's
+    # own (Qhull, run next, takes far more memory than the core on the same points)
+    rss_before = _rss_mb()
+    t = time.perf_counter()
+    res = simplify_points(X, ratio=0.2, options=SimplifyOptions(progressive=False))
+    t_core = time.perf_counter() - t
+    rss_core = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     t = time.perf_counter()
     Delaunay(X - X.mean(0), qhull_options="Qbb Qc Qz Q12")
     t_qhull = time.perf_counter() - t
@@ -74,9 +83,6 @@ def one(kind, n):
     cKDTree(X).query(X, k=17)
     t_knn = time.perf_counter() - t
     t = time.perf_counter()
-    res = simplify_points(X, ratio=0.2, options=SimplifyOptions(progressive=False))
-    t_core = time.perf_counter() - t
-    t = time.perf_counter()
     simplify_points(X, ratio=0.2)
     t_prog = time.perf_counter() - t
     st = res.stats
@@ -84,7 +90,16 @@ def one(kind, n):
             "neighbours": st["seconds_neighbours_normals"], "removal": st["seconds_removal"],
             "refine": st.get("seconds_refine", 0.0),
             "boundary": st["n_boundary"],
+            "rss_before_mb": rss_before, "rss_core_mb": rss_core,
             "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def _rss_mb():
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
 
 
 def main(cases):
@@ -95,7 +110,8 @@ def main(cases):
                              capture_output=True, text=True).stdout
         rows.append(json.loads(out.strip().splitlines()[-1]))
     print("| cloud | points | core s | µs/pt | pts/s | neighbours s | removal s | refine s "
-          "| progressive s | Qhull s | our Delaunay s | kNN-17 s | core / Qhull | peak RSS MB |")
+          "| progressive s | Qhull s | our Delaunay s | kNN-17 s | core / Qhull "
+          "| core peak RSS MB (B/pt above the loaded cloud) |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         n = r["n"]
@@ -103,7 +119,16 @@ def main(cases):
               f"| {r['neighbours']:.2f} | {r['removal']:.2f} | {r.get('refine', 0.0):.2f} "
               f"| {r['progressive']:.2f} "
               f"| {r['qhull']:.2f} | {r.get('delaunay', float('nan')):.2f} | {r['knn17']:.2f} | {r['core'] / r['qhull']:.1f}x "
-              f"| {r['rss_mb']:.0f} |")
+              f"| {_core_rss(r)} |")
+
+
+def _core_rss(r):
+    """The core's peak RSS and its bytes per input point above the RSS before the call (runs
+    saved before the core was measured on its own have only the process's, Qhull's included)."""
+    if "rss_core_mb" not in r:
+        return f"{r['rss_mb']:.0f} (with Qhull)"
+    per = (r["rss_core_mb"] - r["rss_before_mb"]) * 2**20 / r["n"]
+    return f"{r['rss_core_mb']:.0f} ({per:,.0f})"
 
 
 if __name__ == "__main__":

@@ -350,8 +350,11 @@ def filter_candidates(X, start, cnt, pool, half, tol, reach):
 def _unique_edges(simplices, n):
     """Unique undirected edges ``(i, j)``, ``i < j``, of ``simplices``, sorted by ``(i, j)``.
 
-    Buckets each edge by its smaller end, then deduplicates and sorts each (short) bucket: one
-    linear pass instead of ``np.unique`` on all ``d(d-1)/2`` edges of every simplex.
+    Buckets each edge by its smaller end, then deduplicates and sorts each (short) bucket in
+    place: one linear pass instead of ``np.unique`` on all ``d(d-1)/2`` edges of every
+    simplex. The buckets are int32 (ids fit: at most ``delaunay.MAX_POINTS``) and the output
+    is allocated at its final size — a tetrahedralisation has ~6.6 tetrahedra and ~40 edge
+    slots per point, so these arrays set the neighbour stage's peak memory.
     """
     t_n, d = simplices.shape
     count = np.zeros(n + 1, dtype=np.int64)
@@ -362,7 +365,7 @@ def _unique_edges(simplices, n):
     for i in range(n):
         count[i + 1] += count[i]
     fill = count[:-1].copy()
-    other = np.empty(count[n], dtype=np.int64)
+    other = np.empty(count[n], dtype=np.int32)
     for t in range(t_n):
         for i in range(d):
             for j in range(i + 1, d):
@@ -372,24 +375,32 @@ def _unique_edges(simplices, n):
                 other[fill[u]] = v
                 fill[u] += 1
     mark = np.full(n, -1, dtype=np.int64)
-    out = np.empty((count[n], 2), dtype=np.int64)
-    k = 0
+    k = 0  # unique edges so far, compacted to the front of ``other``; fill[a]: a's first
     for a in range(n):
         k0 = k
         for t in range(count[a], count[a + 1]):
             b = other[t]
             if mark[b] != a:
                 mark[b] = a
-                out[k, 0] = a
-                out[k, 1] = b
+                other[k] = b
                 k += 1
-        out[k0:k, 1] = np.sort(out[k0:k, 1])
-    return out[:k]
+        other[k0:k] = np.sort(other[k0:k])
+        fill[a] = k0
+    out = np.empty((k, 2), dtype=np.int64)
+    for a in range(n):
+        end = fill[a + 1] if a + 1 < n else k
+        for t in range(fill[a], end):
+            out[t, 0] = a
+            out[t, 1] = other[t]
+    return out
 
 
 def _simplex_edges(simplices):
     """Unique undirected edges (i < j) of a simplicial complex, sorted by (i, j)."""
-    simplices = np.ascontiguousarray(simplices, dtype=np.int64)
+    simplices = np.asarray(simplices)
+    if simplices.dtype not in (np.int32, np.int64):
+        simplices = simplices.astype(np.int64)
+    simplices = np.ascontiguousarray(simplices)
     if not simplices.size:
         return np.empty((0, 2), np.int64)
     return _unique_edges(simplices, int(simplices.max()) + 1)
