@@ -238,21 +238,26 @@ def _smallest_scatter(a00, a01, a02, a11, a12, a22):
 #: of the trigonometric eigenvalues (about sqrt(machine epsilon), 1e-8, of the trace where two
 #: of them nearly tie), so the split chosen is the same
 FLOOR_MARGIN = 1e-6
+#: Newton steps :func:`_scatter_floor` takes after its first bound
+FLOOR_STEPS = 2
 
 
 @jit
 def _scatter_floor(a00, a01, a02, a11, a12, a22):
     """A lower bound on :func:`_smallest_scatter` without eigenvalues, and the scatter's trace.
 
-    ``λ0 = det / (λ1 λ2) >= det / (λ0 λ1 + λ0 λ2 + λ1 λ2)``: the denominator is the sum of the
-    principal 2x2 minors, so no eigenvalue is needed. For points spread in a plane (``λ0`` small
-    against ``λ1``, ``λ2``), as the halves of a sweep mostly are, the bound falls short of
-    ``λ0`` only by the factor ``1 + λ0 (λ1 + λ2) / (λ1 λ2)``, so nearly every split that cannot
-    beat the best is ruled out. Where the minors are below ``1e-6`` of the squared trace (the
-    points nearly on a line) their rounding could make the quotient anything: the bound is 0
-    there. Elsewhere the determinant's rounding (a few machine epsilons of the cubed trace)
-    over minors of at least ``1e-6`` of its square stays near 1e-9 of the trace (an estimate),
-    far inside ``FLOOR_MARGIN``.
+    ``λ0`` is the least root of the characteristic polynomial ``p(λ) = det − M λ + T λ² − λ³``
+    (``T`` the trace, ``M`` the sum of the principal 2x2 minors). On ``[0, λ0]`` it is
+    decreasing and convex (``p'' = 2T − 6λ > 0`` for ``λ < T / 3``, and ``λ0 <= T / 3``), so
+    Newton's steps from 0 stay below ``λ0`` and climb towards it: the first is ``det / M``
+    (the bound the sweep used alone until 2026-12, ``λ0 = det / (λ1 λ2) >= det / M``), and
+    ``FLOOR_STEPS`` more make it nearly tight where the points are not flat as well — a
+    two-ring in vegetation (LiDAR), whose splits the first bound rarely ruled out. No step
+    may pass ``λ0``: a step is taken only while ``p`` stays positive, the iterate ``x`` below
+    the root. Where the minors are below ``1e-6`` of the squared trace (the points nearly on a
+    line) their rounding could make the quotient anything: the bound is 0 there. Elsewhere
+    each step's rounding (a few machine epsilons of ``T³`` over ``|p'| >= M - 2Tx`` with ``x``
+    below ``λ0``) stays near 1e-9 of the trace (an estimate), far inside ``FLOOR_MARGIN``.
     """
     m00 = a11 * a22 - a12 * a12
     m11 = a00 * a22 - a02 * a02
@@ -262,7 +267,14 @@ def _scatter_floor(a00, a01, a02, a11, a12, a22):
     trace = a00 + a11 + a22
     if det <= 0.0 or not minors > 1e-6 * trace * trace:
         return 0.0, max(trace, 0.0)
-    return det / minors, trace
+    x = det / minors
+    for _ in range(FLOOR_STEPS):
+        value = det - x * (minors - x * (trace - x))
+        slope = minors - x * (2.0 * trace - 3.0 * x)  # -p'(x)
+        if not (value > 0.0 and slope > 0.0):
+            break
+        x += value / slope
+    return x, trace
 
 
 @jit
