@@ -376,14 +376,16 @@ def makes_new_points(name):
     return PEERS[name][2]
 
 
-def ours(mode):
-    """tiledsimplify in one mode as a method ``(X, count) -> Kept`` (boundary flags kept)."""
+def ours(mode, options=None):
+    """tiledsimplify in one mode as a method ``(X, count) -> Kept`` (boundary flags kept);
+    ``options``: other :class:`SimplifyOptions` fields by name (the mode's defaults else)."""
     def method(X, count, *, seed=0):
         from tiledsimplify import BudgetWarning, SimplifyOptions, simplify_points
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", BudgetWarning)
-            res = simplify_points(X, count=count, options=SimplifyOptions(mode=mode))
+            res = simplify_points(X, count=count, options=SimplifyOptions.from_mapping(
+                {**(options or {}), "mode": mode}))
         sec = time.perf_counter() - t
         return Kept(X[res.keep], res.keep, sec, f"mode={mode}", boundary=res.boundary,
                     extra={"reached": res.reached, "message": res.message})
@@ -391,10 +393,11 @@ def ours(mode):
     return method
 
 
-def our_methods():
-    """``{"tiledsimplify <mode>": method}`` for every mode the core offers."""
+def our_methods(options=None):
+    """``{"tiledsimplify <mode>": method}`` for every mode the core offers (``options``: see
+    :func:`ours`)."""
     from tiledsimplify.core.options import MODES
-    return {f"tiledsimplify {m}": ours(m) for m in MODES}
+    return {f"tiledsimplify {m}": ours(m, options) for m in MODES}
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ Cases (``--list``): ``bunny`` (35,947 points, 10 %, paper Fig. 3); ``fandisk`` (
     python benchmarks/quality.py --cases all --skip "CGAL WLOP"
     python benchmarks/quality.py --list
     python benchmarks/quality.py --from-json out.json       # tables + summary, no new run
+    python benchmarks/quality.py --cases all --modes coverage --skip all --option edge_width=0.9
 
 The summary table gives, per case and mode, our value against the best peer's at the same
 count (bold where ours is at least as good).
@@ -353,6 +354,8 @@ def main(argv=None):
     p.add_argument("--only", default=None, help="comma-separated peer names to run")
     p.add_argument("--skip", default="", help="comma-separated peer names to leave out "
                    "('all': no peers, e.g. to re-run our modes and merge with --from-json)")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="a SimplifyOptions field for our modes, e.g. edge_width=0.9 (repeatable)")
     p.add_argument("--modes", default=None,
                    help="comma-separated modes of ours to run (default: every mode)")
     p.add_argument("--cad-points", type=int, default=20_000,
@@ -389,7 +392,21 @@ def main(argv=None):
     skip = {s.strip() for s in args.skip.split(",") if s.strip()}
     methods = {} if "all" in skip else {k: v for k, v in peers.available(only).items()
                                           if k not in skip}
-    ours = peers.our_methods()
+    overrides = {}
+    for item in args.option:
+        key, sep, value = item.partition("=")
+        if not sep:
+            p.error(f"--option takes KEY=VALUE (a SimplifyOptions field), got {item!r}")
+        try:
+            overrides[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            overrides[key.strip()] = value
+    from tiledsimplify import InputError, SimplifyOptions
+    try:
+        SimplifyOptions.from_mapping(overrides)
+    except (InputError, TypeError) as exc:
+        p.error(f"--option: {exc}")
+    ours = peers.our_methods(overrides)
     if args.modes:
         modes = [m.strip() for m in args.modes.split(",")]
         unknown = [m for m in modes if f"tiledsimplify {m}" not in ours]
