@@ -30,6 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from pipeline_speed import _rss_mb  # noqa: E402  (the process's current RSS, MB)
+
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
@@ -93,13 +96,6 @@ def one(kind, n):
             "rss_before_mb": rss_before, "rss_core_mb": rss_core,
             "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
-
-def _rss_mb():
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 def main(cases):
