@@ -384,7 +384,13 @@ def _unique_edges(simplices, n):
                 mark[b] = a
                 other[k] = b
                 k += 1
-        other[k0:k] = np.sort(other[k0:k])
+        for t in range(k0 + 1, k):  # sort the bucket in place (a few entries; no allocation)
+            b = other[t]
+            j = t
+            while j > k0 and other[j - 1] > b:
+                other[j] = other[j - 1]
+                j -= 1
+            other[j] = b
         fill[a] = k0
     out = np.empty((k, 2), dtype=np.int64)
     for a in range(n):
