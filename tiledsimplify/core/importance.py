@@ -26,7 +26,9 @@ bound on the Hausdorff radius each point covers, inherited by the nearest neighb
 — worse Hausdorff on Fandisk at 20 %, 210 vs 188 × 1e-4 of the diagonal.)
 
 Measures are selected by name and dispatched by a small integer inside the removal kernel, so
-new measures plug in without touching the loop.
+new measures plug in without touching the loop. A measure may read the positions of boundary
+neighbours but not their local meshes or normals: the removal loop does not update those
+(:mod:`.removal`, step 2).
 """
 
 import math

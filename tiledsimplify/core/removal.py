@@ -6,7 +6,10 @@ changes (Fig. 1):
 1. the Voronoi neighbourhoods around it (:func:`.voronoi.remove_point`: the former neighbours
    of ``p`` may become neighbours of each other);
 2. the local meshes ``DN_a`` and normals of those former neighbours ``a`` (the first ring) —
-   ``DN_a ⊆ VN_a`` depends on nothing else;
+   ``DN_a ⊆ VN_a`` depends on nothing else — except boundary points: they are never removed
+   and no importance reads their local mesh or normal (Eq. (1) skips boundary neighbours, the
+   coverage term reads positions only), so theirs are left as they were (their Voronoi lists
+   are kept exact like every other point's);
 3. the importance of every point whose local mesh changed, and of every point with a neighbour
    whose normal changed (the second ring: points ``x`` with ``a ∈ DN_x``, found in ``VN_a``).
 
@@ -142,6 +145,8 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
             mbufs = np.empty((3, 2 * m + 10), dtype=np.int64)
         for j in range(k):
             a = link[j]
+            if boundary[a]:  # never removed, and Eq. (1) ignores its normal: nothing to do
+                continue
             s = start[a]
             if cnt[a] == before[a] - 1 and stable[a] > 0:  # lost p, gained nothing
                 in_dn = False
