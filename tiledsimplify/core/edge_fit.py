@@ -297,10 +297,9 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work):
     best = np.inf
     best_d = 0
     best_k = least
-    order = np.empty(c, dtype=np.int64)
     for d in range(NDIR):
         _project(X, idx, c, p, t1, t2, np.pi * d / NDIR, proj)
-        _argsort_small(proj, c, order)
+        order = np.argsort(proj[:c])
         left = NO_MOMENTS
         for k in range(1, c - least + 1):
             left = add_moments(left, X, idx[order[k - 1]], px, py, pz)
@@ -320,23 +319,10 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work):
             if sse < best:
                 best, best_d, best_k = sse, d, k
     _project(X, idx, c, p, t1, t2, np.pi * best_d / NDIR, proj)
-    _argsort_small(proj, c, order)
+    order = np.argsort(proj[:c])
     for i in range(c):
         side[order[i]] = 0 if i < best_k else 1
     return True
-
-
-@jit_inline
-def _argsort_small(values, c, order):
-    """``order[:c]`` = the stable ascending order of ``values[:c]`` (an insertion sort: a
-    two-ring holds a few dozen points)."""
-    for i in range(c):
-        v = values[i]
-        j = i
-        while j > 0 and values[order[j - 1]] > v:
-            order[j] = order[j - 1]
-            j -= 1
-        order[j] = i
 
 
 @jit
