@@ -97,7 +97,6 @@ def one(kind, n):
             "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
-
 def main(cases):
     rows = []
     for case in cases:

@@ -387,7 +387,8 @@ def ours(mode, options=None):
             res = simplify_points(X, count=count, options=SimplifyOptions.from_mapping(
                 {**(options or {}), "mode": mode}))
         sec = time.perf_counter() - t
-        return Kept(X[res.keep], res.keep, sec, f"mode={mode}", boundary=res.boundary,
+        setting = ", ".join(f"{k}={v}" for k, v in {"mode": mode, **(options or {})}.items())
+        return Kept(X[res.keep], res.keep, sec, setting, boundary=res.boundary,
                     extra={"reached": res.reached, "message": res.message})
     method.__name__ = f"tiledsimplify_{mode}"
     return method
