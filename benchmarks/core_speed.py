@@ -1,8 +1,9 @@
 """Speed and memory of the in-memory core against the library calls it is built from.
 
 Each case runs in its own process. The core runs first after the JIT is warmed and the cloud
-loaded, so the peak RSS read right after it is the core's own; the table gives it and the bytes
-per input point above the RSS before the call. Peers timed in the same process, after it:
+loaded, with the peak RSS reset to the current one just before it (Linux), so the peak read
+right after it is the core's own; the table gives it and the bytes per input point above the
+RSS before the call. Peers timed in the same process, after it:
 scipy's Qhull 3-D Delaunay and a cKDTree 17-nearest query on the same points — the two library
 calls a per-point neighbourhood method cannot avoid — so the table reads as ratios that hold
 across machines; and the core's own Delaunay (:mod:`tiledsimplify.core.delaunay`, which
@@ -32,6 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from pipeline_speed import _rss_mb  # noqa: E402  (the process's current RSS, MB)
+from speed import _vm_hwm_mb  # noqa: E402  (its peak RSS, MB)
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -68,13 +70,15 @@ def one(kind, n):
     simplify_points(cloud("flat", 2000), ratio=0.2)  # warm the JIT
     X = cloud(kind, n)
     n = len(X)
-    # the core first, so that the process's high-water mark read right after it is the core's
-    # own (Qhull, run next, takes far more memory than the core on the same points)
+    # the core first, with the high-water mark reset to the current RSS, so that the peak read
+    # right after it is the core's own (loading the cloud may have set a higher one, and Qhull,
+    # run next, takes far more memory than the core on the same points)
     rss_before = _rss_mb()
+    _reset_peak()
     t = time.perf_counter()
     res = simplify_points(X, ratio=0.2, options=SimplifyOptions(progressive=False))
     t_core = time.perf_counter() - t
-    rss_core = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    rss_core = _vm_hwm_mb()
     t = time.perf_counter()
     Delaunay(X - X.mean(0), qhull_options="Qbb Qc Qz Q12")
     t_qhull = time.perf_counter() - t
@@ -95,6 +99,15 @@ def one(kind, n):
             "boundary": st["n_boundary"],
             "rss_before_mb": rss_before, "rss_core_mb": rss_core,
             "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def _reset_peak():
+    """Set this process's peak RSS (VmHWM) back to its current RSS (Linux ``clear_refs``)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:  # not Linux, or not allowed: the peak may then predate the core
+        pass
 
 
 def main(cases):

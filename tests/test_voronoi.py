@@ -262,12 +262,13 @@ def test_maintenance_equals_rebuild(kind, reach):
     assert diffs == []
 
 
+@pytest.mark.parametrize("dtype", [np.int64, np.int32])  # int32: Qhull's and ours as built
 @pytest.mark.parametrize("shape", [(400, 3), (300, 2), (5, 3)])
-def test_simplex_edges_equal_unique_of_all_simplex_edges(shape):
+def test_simplex_edges_equal_unique_of_all_simplex_edges(shape, dtype):
     """The one-pass edge extraction gives exactly the sorted unique edges np.unique gives."""
     from scipy.spatial import Delaunay
     X = np.random.default_rng(1).random(shape)
-    S = Delaunay(X).simplices.astype(np.int64)
+    S = Delaunay(X).simplices.astype(dtype)
     d = S.shape[1]
     pairs = np.concatenate([np.sort(S[:, [i, j]], axis=1) for i in range(d)
                             for j in range(i + 1, d)])

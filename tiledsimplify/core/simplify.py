@@ -396,7 +396,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     lap("removal")
 
     normals_u = st.initial_normals
-    del st, state  # the lists, meshes and normals (~0.5 KB a point) are not needed from here:
+    del st, state  # the lists, meshes and normals (~0.4 KB a point) are not needed from here:
     # released before the refinement, whose searches would otherwise set the peak memory
     order = np.concatenate([dup_order, rep[order_u]])
     order_importance = np.concatenate([np.zeros(dup_order.size), at_u])

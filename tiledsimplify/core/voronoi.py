@@ -375,7 +375,8 @@ def _unique_edges(simplices, n):
                 other[fill[u]] = v
                 fill[u] += 1
     mark = np.full(n, -1, dtype=np.int64)
-    k = 0  # unique edges so far, compacted to the front of ``other``; fill[a]: a's first
+    k = 0  # unique edges so far, compacted to the front of ``other``; count[a] becomes the
+    # first of a's (count[a + 1] is read before it is overwritten)
     for a in range(n):
         k0 = k
         for t in range(count[a], count[a + 1]):
@@ -391,11 +392,11 @@ def _unique_edges(simplices, n):
                 other[j] = other[j - 1]
                 j -= 1
             other[j] = b
-        fill[a] = k0
+        count[a] = k0
+    count[n] = k
     out = np.empty((k, 2), dtype=np.int64)
     for a in range(n):
-        end = fill[a + 1] if a + 1 < n else k
-        for t in range(fill[a], end):
+        for t in range(count[a], count[a + 1]):
             out[t, 0] = a
             out[t, 1] = other[t]
     return out
