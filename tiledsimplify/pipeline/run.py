@@ -13,6 +13,7 @@ import hashlib
 import json
 import logging
 import math
+import os
 import sys
 import tempfile
 import time
@@ -25,7 +26,7 @@ import numpy as np
 from dask.callbacks import Callback
 
 from .. import __version__
-from ..core import SimplifyOptions, edge_fit
+from ..core import SimplifyOptions, compile_cache, edge_fit
 from ..core.result import resolve_target
 from ..errors import InputError, TiledSimplifyError
 from ..io.las import LAS_SUFFIXES
@@ -116,6 +117,17 @@ class _Progress:
         if self.bar:
             self.out.write("\n")
             self.out.flush()
+
+
+def _start_compile(client, scheduler, workers):
+    """On a cold kernel cache with local workers: compile every kernel in ``workers``
+    processes while the input is ingested (:func:`..core.compile_cache.start`). Not for a
+    cluster, whose workers compile or load their own cache (``tiledsimplify compile`` on each
+    node or in its image spares them that)."""
+    if client is not None or scheduler not in SCHEDULERS:
+        return None
+    return compile_cache.start(
+        1 if scheduler == "synchronous" else workers or os.cpu_count() or 1)
 
 
 def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describe=None):
@@ -278,6 +290,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 "version": __version__}
     fp = _fingerprint(source, settings)
 
+    warming = _start_compile(client, scheduler, workers)
     tmp = None
     if store is None:
         tmp = tempfile.TemporaryDirectory(prefix="tiledsimplify-")
@@ -303,6 +316,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             log.info("ingested %d points into %d tiles (halo %.4g, spacing %.4g) in %.1f s",
                      n, ts.n_tiles, ts.halo, ts.spacing, time.perf_counter() - clock[0])
         stage("ingest")
+        if warming is not None:  # the kernels' first compile, started before the ingest
+            warming.join()
+            stage("compile")
 
         # one spacing for every tile: the coverage measure's scale and the Voronoi reach
         spacing = options.spacing
