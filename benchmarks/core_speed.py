@@ -110,7 +110,15 @@ def _reset_peak():
         pass
 
 
+KINDS = ("scan", "bunny", "flat")
+
+
 def main(cases):
+    for case in cases:
+        kind, _, n = case.partition(":")
+        if kind not in KINDS or not n.isdigit():
+            sys.exit(f"not a case: {case!r}; give CLOUD:POINTS with CLOUD one of {KINDS}, "
+                     "e.g. scan:100000 (see the module docstring)")
     rows = []
     for case in cases:
         kind, n = case.split(":")
