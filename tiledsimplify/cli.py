@@ -220,7 +220,6 @@ def _run(args):
 def _simplify(args):
     t0 = time.perf_counter()
     check_output(args.output)
-    warming = compile_cache.start(os.cpu_count() or 1)  # a cold cache: while reading
     xyz = read_points(args.input)
     log.info("read %d points from %s in %.2f s", len(xyz), args.input, time.perf_counter() - t0)
     if len(xyz) == 0:
@@ -228,6 +227,7 @@ def _simplify(args):
                                  "Check that it is the file you meant.")
     options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
                               detect_boundary=not args.no_boundary)
+    warming = compile_cache.start(os.cpu_count() or 1)  # a cold cache: all cores compile
     if warming is not None:
         warming.join()
     with warnings.catch_warnings(record=True) as caught:
