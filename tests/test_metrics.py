@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial import cKDTree
 import pytest
 
 from tiledsimplify import metrics as M
@@ -225,6 +226,31 @@ def test_sample_segments():
     # first: ceil(1/0.3)=4 pieces -> 5 points; second: 1 piece -> 2 points; shared vertex once
     assert pts.shape == (6, 3)
     np.testing.assert_allclose(np.sort(pts[:, 0])[:5], [0, 0.25, 0.5, 0.75, 1.0])
+
+
+def test_sample_segments_follows_polylines_by_arc_length():
+    # a circle of radius 1 in 1,000 segments, and a chord-tessellated arc meeting a straight
+    # edge at a corner: the circle gets ceil(2 pi / 0.1) = 63 samples, not 1,000 (one per
+    # vertex); the corner ends both lines and is sampled
+    th = np.linspace(0, 2 * np.pi, 1001)[:-1]
+    ring = np.c_[np.cos(th), np.sin(th), np.zeros_like(th)]
+    circle = np.stack([ring, np.roll(ring, -1, axis=0)], axis=1)
+    pts = M.sample_segments(circle, 0.1)
+    assert pts.shape == (63, 3)
+    np.testing.assert_allclose(np.linalg.norm(pts[:, :2], axis=1), 1.0, atol=2e-5)
+    gaps = cKDTree(pts).query(pts, k=2)[0][:, 1]
+    assert gaps.max() <= 0.1 and gaps.min() > 0.099
+    arc = ring[:251] + [3, 0, 0]  # a quarter circle about (3, 0, 0), from (4, 0) to (3, 1)
+    lines = np.r_[np.stack([arc[:-1], arc[1:]], axis=1),
+                  [[arc[-1], arc[-1] + [0, 0.5, 0]]]]  # then straight, turning by 90 degrees
+    pts = M.sample_segments(lines, 0.1)
+    assert len(pts) == 1 + 16 + 5  # ceil((pi / 2) / 0.1) = 16 pieces, ceil(0.5 / 0.1) = 5
+    assert np.min(np.linalg.norm(pts - arc[-1], axis=1)) < 1e-12  # the corner itself
+
+
+def test_sample_segments_of_zero_length():
+    point = np.array([[[1.0, 2, 3], [1.0, 2, 3]]])  # no line at all
+    assert M.sample_segments(point, 0.1).shape == (0, 3)
 
 
 # ---------------------------------------------------------------------------

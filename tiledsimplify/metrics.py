@@ -525,35 +525,76 @@ def hausdorff_distance(original: Any, kept: Any) -> float:
 # ---------------------------------------------------------------------------
 
 
+#: a vertex where the edge turns by more than this (degrees) ends a polyline (a corner)
+CORNER_DEG = 30.0
+
+
 def sample_segments(edge_segments: Any, spacing: float) -> np.ndarray:
-    """Sample points along segments at (at most) the given spacing.
+    """Sample the edge lines the segments form at (at most) the given spacing, by arc length.
+
+    Segments are joined into polylines at the vertices (equal coordinates) that exactly two
+    segments share and where the line turns by at most :data:`CORNER_DEG`; every other vertex
+    (an end, a junction, a corner) ends a polyline. A polyline of length ``L`` gets
+    ``ceil(L / spacing) + 1`` evenly spaced samples along it, its ends included. So a curved
+    edge tessellated into segments much shorter than the spacing (a hole's rim, a thread, an
+    engraving) is sampled at the spacing like a straight one — DESIGN §4's "sample the true
+    sharp edges at the original spacing" — and not once per segment end, which weighted such
+    edges by their tessellation (the counter part's 31,565 segments gave 33,952 samples for
+    6,898 spacings of edge).
 
     Parameters
     ----------
     edge_segments : array_like, shape (k, 2, 3)
         Segment end points.
     spacing : float
-        Maximum distance between consecutive samples on a segment (> 0).
+        Maximum distance between consecutive samples along a polyline (> 0).
 
     Returns
     -------
     numpy.ndarray, shape (p, 3)
-        Both end points of every segment plus evenly spaced interior points;
-        segment ``i`` of length ``L`` gets ``ceil(L / spacing) + 1`` samples.
-        Exact duplicates (shared vertices) are removed.
+        Unique sample points.
     """
     seg = _check_segments(edge_segments)
     s = _check_positive(spacing, "spacing")
-    a, b = seg[:, 0], seg[:, 1]
-    length = np.linalg.norm(b - a, axis=1)
-    pieces = np.maximum(np.ceil(length / s), 1).astype(np.int64)
-    counts = pieces + 1
-    owner = np.repeat(np.arange(seg.shape[0]), counts)
-    starts = np.cumsum(counts) - counts
-    local = np.arange(owner.size) - np.repeat(starts, counts)
-    t = (local / pieces[owner])[:, None]
-    pts = a[owner] * (1.0 - t) + b[owner] * t  # t=0 -> a, t=1 -> b exactly
-    return np.unique(pts, axis=0)
+    pos, vid = np.unique(seg.reshape(-1, 3), axis=0, return_inverse=True)
+    vid = vid.reshape(-1, 2)
+    vid = vid[vid[:, 0] != vid[:, 1]]  # zero-length segments join nothing
+    nbrs = [[] for _ in range(len(pos))]
+    for i, (u, w) in enumerate(vid):
+        nbrs[u].append((w, i))
+        nbrs[w].append((u, i))
+    cos_corner = np.cos(np.deg2rad(CORNER_DEG))
+
+    def passes(v):  # a polyline runs on through v
+        if len(nbrs[v]) != 2:
+            return False
+        d1 = pos[v] - pos[nbrs[v][0][0]]
+        d2 = pos[nbrs[v][1][0]] - pos[v]
+        return float(d1 @ d2) > cos_corner * float(np.linalg.norm(d1) * np.linalg.norm(d2))
+
+    used = np.zeros(len(vid), dtype=bool)
+    lines = []
+    ends = [v for v in range(len(pos)) if nbrs[v] and not passes(v)]
+    for start in ends + list(range(len(pos))):  # then the closed loops with no end
+        for nxt, i in nbrs[start]:
+            if used[i]:
+                continue
+            used[i] = True
+            line = [start, nxt]
+            while nxt != start and passes(nxt):
+                step = [(w, j) for w, j in nbrs[nxt] if not used[j]]
+                if not step:
+                    break
+                nxt, j = step[0]
+                used[j] = True
+                line.append(nxt)
+            lines.append(pos[line])
+    pts = []
+    for line in lines:
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
+        t = np.linspace(0.0, arc[-1], int(max(np.ceil(arc[-1] / s - 1e-9), 1)) + 1)
+        pts.append(np.column_stack([np.interp(t, arc, line[:, c]) for c in range(3)]))
+    return np.unique(np.concatenate(pts), axis=0) if pts else np.zeros((0, 3))
 
 
 def edge_coverage(

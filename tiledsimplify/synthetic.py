@@ -326,12 +326,14 @@ def sample_edges(vertices, faces, spacing: float, angle_deg: float = 30.0) -> np
 
     Notes
     -----
-    Each sharp edge of length ``L`` is split into ``max(1, ceil(L / spacing))`` equal
-    segments; the segment ends are the points, the edge end points included. End points
-    are the exact vertex coordinates, and points shared by several edges (or equal
-    positions of duplicated vertices) appear once. A unit cube with ``spacing=0.1``
-    gives 8 corners + 12 * 9 interior points = 116.
+    The sharp edges are joined into polylines and sampled by arc length
+    (:func:`tiledsimplify.metrics.sample_segments`): a polyline of length ``L`` is split into
+    ``max(1, ceil(L / spacing))`` equal pieces; the piece ends are the points, the polyline
+    ends (its end vertices: corners, junctions, open ends) included, so a curved edge
+    tessellated finer than the spacing is sampled at the spacing, not at every vertex. A unit
+    cube with ``spacing=0.1`` gives 8 corners + 12 * 9 interior points = 116.
     """
+    from .metrics import sample_segments
     v, f = _check_mesh(vertices, faces)
     spacing = float(spacing)
     if not spacing > 0 or not math.isfinite(spacing):
@@ -339,19 +341,7 @@ def sample_edges(vertices, faces, spacing: float, angle_deg: float = 30.0) -> np
     edges = sharp_edges(v, f, angle_deg)
     if len(edges) == 0:
         return np.zeros((0, 3))
-    a, b = v[edges[:, 0]], v[edges[:, 1]]
-    length = np.linalg.norm(b - a, axis=1)
-    nseg = np.maximum(1, np.ceil(length / spacing - 1e-9)).astype(np.int64)
-    ninner = nseg - 1
-    eid = np.repeat(np.arange(len(edges)), ninner)
-    first = np.zeros(len(edges), dtype=np.int64)
-    np.cumsum(ninner[:-1], out=first[1:])
-    k = np.arange(int(ninner.sum()), dtype=np.int64) - first[eid] + 1
-    t = (k / nseg[eid])[:, None]
-    inner = a[eid] + t * (b[eid] - a[eid])
-    ends = v[np.unique(edges)]
-    pts = np.concatenate([ends, inner]) + 0.0
-    return np.unique(pts, axis=0)
+    return sample_segments(v[edges], spacing)
 
 
 # --------------------------------------------------------------------------------------
