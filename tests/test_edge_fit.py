@@ -116,12 +116,18 @@ def test_band_is_narrower_beside_a_soft_edge():
     assert widths[1] < 0.85 * widths[0]
 
 
-def test_no_edge_on_a_noisy_plane_or_a_shallow_fold():
-    rng = np.random.default_rng(1)
-    P = np.c_[rng.random((3000, 2)), np.zeros(3000)]
-    P[:, 2] += 0.1 * 0.015 * rng.normal(size=3000)  # noise 0.1 x spacing
-    est, _, _ = _localise_all(P)
-    assert np.isfinite(est).mean() < 0.01
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_no_edge_on_a_noisy_plane_or_a_shallow_fold(seed):
+    # measured (seeds 1-5, MIN_ANGLE 40): on a plane with noise 0.1 x spacing 1.4-2.2 % of the
+    # points fit two planes and at most 0.3 % are flagged; with noise 0.2, 7.6-9.3 % and at
+    # most 0.93 % (at MIN_ANGLE 45: 1.0-1.5 % / 0.23 %, 6.7-8.4 % / 0.87 %)
+    rng = np.random.default_rng(seed)
+    for noise, fits, flagged in ((0.1, 0.03, 0.005), (0.2, 0.12, 0.015)):
+        P = np.c_[rng.random((3000, 2)), np.zeros(3000)]
+        P[:, 2] += noise * 0.015 * rng.normal(size=3000)  # the spacing is ~0.015
+        est, _, angle = _localise_all(P)
+        assert np.isfinite(est).mean() < fits
+        assert edge_fit.band(est, angle, edge_fit.WIDTH).mean() < flagged
     shallow = _roof(rng, 3000, angle_deg=170.0)  # a 10° crease is not a sharp edge
     est, _, _ = _localise_all(shallow)
     assert not np.isfinite(est).any()
