@@ -1,13 +1,10 @@
-"""Compile the kernels before the first run, and record which kernels there are.
+"""Which kernels the package calls, with which argument types: the record that
+``tiledsimplify compile`` (:mod:`.core.compile_cache`) compiles ahead from.
 
-``tiledsimplify compile`` (:func:`warm`) fills numba's on-disk cache in parallel processes
-(:mod:`.core.compile_cache`): run it once in a container image or on each cluster node, and no
-run there spends its first ~40 s compiling. ``tiledsimplify run`` does it by itself on a cold
-cache with local workers.
-
-``python -m tiledsimplify.warmup --record`` runs :func:`workloads` and rewrites the recorded
-signatures (``core/kernel_signatures.txt``); run it after changing a kernel's arguments (the
-test suite says when).
+``python -m tiledsimplify.warmup --record`` runs :func:`workloads` and rewrites
+``core/kernel_signatures.txt``; run it after changing a kernel's arguments (the test suite says
+when the file is stale). It lives here, not in ``core/``, because the workloads run the tiled
+pipeline too.
 """
 
 import subprocess
@@ -18,12 +15,6 @@ from pathlib import Path
 import numpy as np
 
 from .core import compile_cache
-
-
-def warm(jobs=None):
-    """Compile every kernel the cache does not hold yet, in ``jobs`` processes (default: one
-    per core). See :func:`.core.compile_cache.compile_all`."""
-    return compile_cache.compile_all(jobs)
 
 
 def workloads():
