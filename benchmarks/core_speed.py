@@ -114,14 +114,15 @@ KINDS = ("scan", "bunny", "flat")
 
 
 def main(cases):
+    parsed = []
     for case in cases:
         kind, _, n = case.partition(":")
         if kind not in KINDS or not n.isdigit():
             sys.exit(f"not a case: {case!r}; give CLOUD:POINTS with CLOUD one of {KINDS}, "
                      "e.g. scan:100000 (see the module docstring)")
+        parsed.append((kind, n))
     rows = []
-    for case in cases:
-        kind, n = case.split(":")
+    for kind, n in parsed:
         out = subprocess.run([sys.executable, __file__, "--one", kind, n], check=True,
                              capture_output=True, text=True).stdout
         rows.append(json.loads(out.strip().splitlines()[-1]))

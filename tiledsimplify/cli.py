@@ -227,9 +227,8 @@ def _simplify(args):
                                  "Check that it is the file you meant.")
     options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
                               detect_boundary=not args.no_boundary)
-    warming = compile_cache.start(os.cpu_count() or 1)  # a cold cache: all cores compile
-    if warming is not None:
-        warming.join()
+    if (os.cpu_count() or 1) > 1:  # a cold cache: all cores compile (at once if warm)
+        compile_cache.compile_all()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", BudgetWarning)
         res = simplify_points(xyz, args.ratio, count=args.count, options=options)

@@ -25,6 +25,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from tiledsimplify.errors import InputError
+from tiledsimplify.metrics import sample_segments
 
 __all__ = [
     "sharp_edges",
@@ -333,7 +334,6 @@ def sample_edges(vertices, faces, spacing: float, angle_deg: float = 30.0) -> np
     tessellated finer than the spacing is sampled at the spacing, not at every vertex. A unit
     cube with ``spacing=0.1`` gives 8 corners + 12 * 9 interior points = 116.
     """
-    from .metrics import sample_segments
     v, f = _check_mesh(vertices, faces)
     spacing = float(spacing)
     if not spacing > 0 or not math.isfinite(spacing):

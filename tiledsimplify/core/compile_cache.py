@@ -208,11 +208,13 @@ def used_signatures():
 
 
 def write_signatures(used, path=SIGNATURES):
-    """Write ``used`` (:func:`used_signatures`) with each kernel's seconds to compile alone:
-    one fresh process with an empty cache per signature. Returns ``[(kernel, seconds)]``."""
+    """Write ``used`` (:func:`used_signatures`) with each kernel's seconds to compile alone,
+    timed as a fresh process with an empty cache per signature (so ~0.5-1 s of interpreter
+    start and imports each; only their order matters, for :func:`partition`). Returns
+    ``[(kernel, seconds)]``."""
     import tempfile
-    lines = ["# kernel\tseconds to compile alone\tsignature (numba types); written by "
-             "python -m tiledsimplify.warmup --record"]
+    lines = ["# kernel\tseconds to start a process and compile it alone\tsignature (numba "
+             "types); written by python -m tiledsimplify.warmup --record"]
     timed = []
     for kernel in sorted(used):
         for sig in sorted(used[kernel], key=repr):
