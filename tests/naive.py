@@ -241,21 +241,39 @@ def thin_lists(nbr, nd, removable, tie, level, n_remove):
     return np.array(removed, dtype=np.int64), dist
 
 
+def exact_order(Q, C, tie, k):
+    """The ``k`` nearest candidates ``C`` of every query ``Q``, in the exact order of
+    :func:`tiledsimplify.core.cell_grid.nearest` — (squared distance rounded as cKDTree rounds
+    it, ``tie``, position) — by brute force: ``(order, squared distances)`` (q, k)."""
+    s = np.zeros((len(Q), len(C)))
+    for d in range(3):
+        e = C[None, :, d] - Q[:, d, None]
+        s += e * e  # ((e0² + e1²) + e2²), as cKDTree adds them
+    k = min(k, len(C))
+    kth = np.partition(s, k - 1, axis=1)[:, k - 1]
+    q, c = np.nonzero(s <= kth[:, None])  # the k nearest and every tie of the k-th
+    o = np.lexsort((c, tie[c], s[q, c], q))
+    q, c = q[o], c[o]
+    rank = np.arange(q.size) - np.searchsorted(q, q)
+    q, c = q[rank < k], c[rank < k]
+    order = c.reshape(len(Q), k)
+    return order, np.take_along_axis(s, order, axis=1)
+
+
 def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=0.05,
                     min_step=0.002, max_rounds=60, k=16):
-    """:func:`tiledsimplify.core.refine.refine_coverage` with every search a scipy kd-tree
-    query, as it was first written: a fill by ball queries, and per round a kd-tree over the
-    candidates, a nearest query of every input point and a ``k``-nearest query of the rows."""
+    """:func:`tiledsimplify.core.refine.refine_coverage` by brute force: per round a fill that
+    lowers every distance, and every input point's candidates sorted by (distance, tie)."""
     from tiledsimplify.core.refine import inputs, lists_from_dense, thin_below
     X, keep, fixed, addable, ignored, watched, tie = inputs(X, keep, fixed, addable, watch, tie)
     info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
     if not (keep & ~fixed).any() or not (addable & ~keep).any():
         return keep, info
-    tree_x = cKDTree(X)
     dist, _ = cKDTree(X[keep]).query(X)
     dist[ignored] = 0.0
     H = float(dist[~watched].max())
     info["hausdorff_before"] = H
+    counted = np.flatnonzero(~ignored)
     while info["rounds"] < max_rounds and step >= min_step and H > 0:
         info["rounds"] += 1
         level = (1.0 - step) * H
@@ -264,27 +282,31 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         added = []
         while True:  # fill, farthest first
             x = int(np.argmax(trial))
-            r = trial[x]
-            if not r > level:
+            if not trial[x] > level:
                 break
             added.append(x)
-            near = np.asarray(tree_x.query_ball_point(X[x], r), dtype=np.int64)
-            np.minimum.at(trial, near, np.linalg.norm(X[near] - X[x], axis=1))
+            e = X - X[x]
+            trial = np.minimum(trial, np.sqrt(e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1]
+                                              + e[:, 2] * e[:, 2]))
             trial[x] = 0.0
         added = np.asarray(added, dtype=np.int64)
         cand = np.concatenate([np.flatnonzero(keep), added])
         removable = ~fixed[cand]
         removable[cand.size - added.size:] = False
-        tree_c = cKDTree(X[cand])
-        d1, o1 = tree_c.query(X)
-        d1[ignored] = 0.0
+        cand_tie = np.ascontiguousarray(tie[cand], dtype=np.uint64)
+        order, s = exact_order(X[counted], X[cand], cand_tie, k)
+        d1 = np.zeros(len(X))
+        d1[counted] = np.sqrt(s[:, 0])
+        o1 = np.full(len(X), -1)
+        o1[counted] = order[:, 0]
         removable[o1[watched & (d1 > level)]] = False
-        rows = np.flatnonzero(removable[o1] & ~ignored)
-        kq = min(k, cand.size)
-        nd, nbr = tree_c.query(X[rows], k=kq, distance_upper_bound=level)
-        gone, d_rows = thin_below(*lists_from_dense(nd, nbr, cand.size), removable,
-                                  np.ascontiguousarray(tie[cand], dtype=np.uint64), level,
-                                  added.size)
+        rows = counted[removable[order[:, 0]]]
+        at = np.searchsorted(counted, rows)
+        inside = s[at] < level * level
+        nd = np.where(inside, np.sqrt(s[at]), np.inf)
+        nbr = np.where(inside, order[at], cand.size)
+        gone, d_rows = thin_below(*lists_from_dense(nd, nbr, cand.size), removable, cand_tie,
+                                  level, added.size)
         if gone.size < added.size:
             step *= 0.5
             continue

@@ -1,5 +1,5 @@
-"""Cell-grid searches (core/cell_grid.py) give cKDTree's answers, bit for bit, or say they
-cannot (ties); the refinement built on them equals the kd-tree version."""
+"""Cell-grid searches (core/cell_grid.py) are exact, ties decided by a key, bit for bit as
+brute force; the refinement built on them equals the brute-force version."""
 
 import numpy as np
 import pytest
@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 
 from tiledsimplify.core import cell_grid
 from tiledsimplify.core.heap import coordinate_hash
-from tiledsimplify.core.refine import lists_from_dense, refine_coverage
+from tiledsimplify.core.refine import refine_coverage
 
 import naive
 
@@ -23,42 +23,68 @@ def _clouds():
     yield "quantised", np.round(rng.random((4000, 3)) * 25) / 25
 
 
+def _expected(X, ids, tie, order, k, bound):
+    """Brute force: nearest and lists of ``X[order]`` among ``X[ids]``, as positions."""
+    o, s = naive.exact_order(X[order], X[ids], tie, k)
+    inside = s[:, :k] < bound * bound
+    return np.sqrt(s[:, 0]), o[:, 0], [o[t, :k][inside[t]].tolist() for t in range(len(o))], \
+        [np.sqrt(s[t, :k][inside[t]]).tolist() for t in range(len(o))]
+
+
 @pytest.mark.parametrize("name,X", list(_clouds()), ids=lambda v: v if isinstance(v, str) else "")
-def test_nearest_equals_kdtree_where_unambiguous(name, X):
+@pytest.mark.parametrize("ties", ["hash", "constant"])
+def test_nearest_is_exact_with_ties_by_key(name, X, ties):
     rng = np.random.default_rng(1)
     ids = np.sort(rng.choice(len(X), len(X) // 5, replace=False))
+    # a coordinate hash, or one key for all: then equal distances go by position
+    tie = (coordinate_hash(X[ids]) if ties == "hash" else np.zeros(ids.size, dtype=np.uint64))
     reach = cKDTree(X[ids]).query(X)[0].max()
     grid = cell_grid.CellGrid(X, reach * 1.01)
     start_c, slot, xyz = grid.members(X, ids)
     order = grid.pt  # queries cell by cell, as the refinement asks them
-    tree = cKDTree(X[ids])
-    rd, ri = tree.query(X[order])
-    n_amb = 0
-    for k, bound in ((16, 0.9 * reach), (4, 0.6 * reach), (16, 0.2 * reach), (16, 1.1 * reach)):
+    n_ties = 0
+    for k, bound in ((16, 0.9 * reach), (4, 0.6 * reach), (16, 0.2 * reach), (1, 0.5 * reach),
+                     (16, 1.1 * reach)):
         d, i, amb1, start, idx, dist, amb = cell_grid.nearest(
             X[order], grid.cell_of[order], grid.near_start, grid.near, start_c, slot, xyz,
-            grid.reach ** 2, k, bound)
-        np.testing.assert_array_equal(d[~amb1], rd[~amb1])  # bit for bit
-        np.testing.assert_array_equal(i[~amb1], ri[~amb1])
-        r_start, r_idx, r_dist = lists_from_dense(
-            *tree.query(X[order], k=k, distance_upper_bound=bound), ids.size)
-        for t in np.flatnonzero(~amb):
-            a, b = start[t], start[t + 1]
-            ra, rb = r_start[t], r_start[t + 1]
-            assert idx[a:b].tolist() == r_idx[ra:rb].tolist()
-            assert dist[a:b].tolist() == r_dist[ra:rb].tolist()  # bit for bit
-        assert (start[1:][amb] == start[:-1][amb]).all()  # flagged lists are left empty
+            grid.reach ** 2, k, bound, tie)
+        rd, ri, r_idx, r_dist = _expected(X, ids, tie, order, k, bound)
+        assert not amb1.any()  # every nearest lies within the cells' reach here
+        np.testing.assert_array_equal(d, rd)  # bit for bit
+        np.testing.assert_array_equal(i, ri)
         if bound > grid.reach:
-            assert amb.all()  # beyond the cells: nothing is claimed
-        else:
-            n_amb += amb.sum() + amb1.sum()
-            # an unflagged list has no two equal distances
-            for t in np.flatnonzero(~amb):
-                assert (np.diff(dist[start[t]:start[t + 1]]) > 0).all()
+            assert amb.all() and start[-1] == 0  # beyond the cells: nothing is claimed
+            continue
+        assert not amb.any()
+        for t in range(len(order)):
+            assert idx[start[t]:start[t + 1]].tolist() == r_idx[t]
+            assert dist[start[t]:start[t + 1]].tolist() == r_dist[t]  # bit for bit
+            n_ties += int((np.diff(r_dist[t]) == 0).sum())
+        # the exact search (kd-tree superset) gives the same answers
+        e_d1, e_i1, e_start, e_idx, e_dist = cell_grid.exact_search(
+            np.ascontiguousarray(X[ids]), tie, X[order], k, bound)
+        np.testing.assert_array_equal(e_d1, rd)
+        np.testing.assert_array_equal(e_i1, ri)
+        used = start[-1]  # the cells' arrays have room for k per query
+        assert e_start.tolist() == start.tolist() and e_idx.tolist() == idx[:used].tolist()
+        assert e_dist.tolist() == dist[:used].tolist()
     if name in ("random", "wavy"):
-        assert n_amb == 0
+        assert n_ties == 0
     else:
-        assert n_amb > 0  # ties exist here and are flagged
+        assert n_ties > 0  # ties exist here, and the key decided them
+
+
+def test_nearest_beyond_the_cells_is_left_to_the_caller():
+    X = np.array([[0.0, 0, 0], [0.1, 0, 0], [5.0, 0, 0]])
+    ids = np.array([0])
+    grid = cell_grid.CellGrid(X, 1.0)
+    start_c, slot, xyz = grid.members(X, ids)
+    d, i, amb1, start, idx, dist, amb = cell_grid.nearest(
+        X, grid.cell_of, grid.near_start, grid.near, start_c, slot, xyz, grid.reach ** 2, 2,
+        0.5, np.zeros(1, dtype=np.uint64))
+    assert amb1.tolist() == [False, False, True]  # point 2's nearest is 5 away: not seen
+    assert i[:2].tolist() == [0, 0] and d[1] == 0.1
+    assert start.tolist() == [0, 1, 2, 2] and not amb.any()
 
 
 def test_cells_hold_every_pair_within_reach():
@@ -81,7 +107,7 @@ def _keeps(X, seed, frac=0.15):
 
 
 @pytest.mark.parametrize("name,X", list(_clouds()), ids=lambda v: v if isinstance(v, str) else "")
-def test_refine_coverage_equals_the_kdtree_version(name, X):
+def test_refine_coverage_equals_brute_force(name, X):
     keep, fixed = _keeps(X, 0)
     tie = coordinate_hash(X)
     got, info = refine_coverage(X, keep, fixed, tie=tie)
@@ -92,10 +118,8 @@ def test_refine_coverage_equals_the_kdtree_version(name, X):
 
 
 @pytest.mark.parametrize("name,X", list(_clouds()), ids=lambda v: v if isinstance(v, str) else "")
-def test_refine_coverage_of_a_tile_equals_the_kdtree_version(name, X):
+def test_refine_coverage_of_a_tile_equals_brute_force(name, X):
     # a tile's view: the right part belongs to another tile, its removed points are watched
-    # (on the quantised cloud one added point's ball is left to the kd-tree: rounding at its
-    # edge could decide it)
     keep, fixed = _keeps(X, 1)
     other = X[:, 0] > np.quantile(X[:, 0], 0.7)
     addable = ~other
@@ -108,12 +132,12 @@ def test_refine_coverage_of_a_tile_equals_the_kdtree_version(name, X):
         assert info["swaps"] > 0
 
 
-def test_refine_coverage_with_coarse_cells_asks_the_kdtree_and_equals_it(monkeypatch):
+def test_refine_coverage_with_coarse_cells_asks_the_exact_search_and_equals_brute_force(monkeypatch):
     from tiledsimplify.core import refine
     X = list(_clouds())[3][1]
     keep, fixed = _keeps(X, 2)
     expect = naive.refine_coverage(X, keep, fixed)
-    monkeypatch.setattr(refine, "MAX_LOAD", 0.0)  # every search by the kd-tree
+    monkeypatch.setattr(refine, "MAX_LOAD", 0.0)  # every search by the exact search
     got = refine_coverage(X, keep, fixed)
     assert np.array_equal(got[0], expect[0]) and got[1] == expect[1]
 
@@ -126,7 +150,7 @@ def test_load_counts_the_members_around_each_query():
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_refine_coverage_on_small_odd_clouds_equals_the_kdtree_version(seed):
+def test_refine_coverage_on_small_odd_clouds_equals_brute_force(seed):
     # tiny, flat, collinear far from the origin, coarse lattices; k down to 1; tiles
     rng = np.random.default_rng(seed)
     for trial in range(12):

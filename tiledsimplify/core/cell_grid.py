@@ -7,22 +7,20 @@ query per round. Here a grid of cubic cells of side ``h`` (at least every radius
 built once over the input points; each round the candidates are sorted into its cells (a
 counting sort) and a search visits the (non-empty) cells among the 27 around a point's cell.
 
-**Same answers as** ``scipy.spatial.cKDTree`` **on the same candidates.** Distances are
-computed as cKDTree computes them (``((dx² + dy²) + dz²)``, then the square root), bit for bit,
-so every distance and every comparison with a bound is the same (a test checks it against the
-installed scipy). cKDTree orders equal distances by the layout of its tree, and rounding in
-its cell bounds could decide between two distances a few ulps apart, so a search whose answer
-depends on the order of two distances within a relative ``TOL`` of each other (or of a bound)
-is flagged *ambiguous*: the caller asks the kd-tree for those points only (on quantised LiDAR
-scans, ~1 % of them).
+**Exact answers, one defined order.** Distances are computed as cKDTree computes them
+(``((dx² + dy²) + dz²)``, then the square root), bit for bit, and candidates are ordered by
+(squared distance, a tie key per candidate, position): equal distances — everywhere on
+quantised LiDAR scans — are decided by the key, not by the layout of a tree. Only a search
+whose radius may reach beyond the 27 cells is left to the caller (:func:`exact_search`
+answers it by brute force over a kd-tree's superset). Before 2026-12-02 the searches followed
+cKDTree's own order of equal distances, which cost a kd-tree over the candidates in every
+round for the ~1 % of points with a tie.
 """
 
 import numpy as np
 
 from ._jit import jit, jit_inline
 
-#: relative margin under which two squared distances (or one and a bound) count as tied
-TOL = 1e-9
 #: a point within (1 - COVER) h of another, in every coordinate, is at most one cell away
 #: (rounding of the cell index is far below this for up to MAX_CELLS cells per axis)
 COVER = 1e-7
@@ -192,11 +190,22 @@ def _gather(cell, near_start, near, start, slot, xyz, buf_xyz, buf_id):
     return buf_xyz, buf_id, cnt
 
 
+@jit_inline
+def _before(s, c, s2, c2, tie):
+    """Whether member ``c`` at squared distance ``s`` comes before ``c2`` at ``s2``: nearer,
+    or as near with the smaller ``tie``, or the same tie too and the smaller position."""
+    if s != s2:
+        return s < s2
+    if tie[c] != tie[c2]:
+        return tie[c] < tie[c2]
+    return c < c2
+
+
 @jit
-def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound):
-    """Nearest members of each query point ``Q`` (q, 3), as cKDTree gives them: the nearest
-    (``query(k=1)``) and the ``k`` nearest closer than ``bound``, nearest first
-    (``query(k=k, distance_upper_bound=bound)``).
+def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, tie):
+    """Nearest members of each query point ``Q`` (q, 3): the nearest, and the ``k`` nearest
+    closer than ``bound``, nearest first — in the exact order of (squared distance, ``tie``,
+    position), ``tie`` (uint64, one per member position) breaking equal distances.
 
     ``q_cell``: the cell of each query point; queries in the same cell one after another
     (e.g. in the order of :attr:`CellGrid.pt`) share one gathering of the members around it,
@@ -207,24 +216,23 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound):
     Returns
     -------
     d1, i1, amb1 : (q,)
-        Distance to and id of the nearest member; ``amb1``: it is not surely nearer than
-        ``reach`` (not surely seen) or not clearly nearer than the next (then undefined).
+        Distance to and position of the nearest member; ``amb1``: none lies surely within
+        ``reach`` (a nearer one may be unseen; then undefined).
     start, idx, dist : CSR
         The lists (``idx[start[t]:start[t + 1]]``; at most ``k``, fewer where fewer lie
         within ``bound``).
     amb : (q,)
-        The list depends on the order of two squared distances within ``TOL`` of each other
-        (among the listed ones and the next), a listed one lies within ``TOL`` of
-        ``bound²``, or ``bound`` is not surely below ``reach``; then it is left empty.
+        ``bound`` is not below ``reach`` (the cells may not hold every member within it); the
+        lists are then left empty.
 
     Notes
     -----
     Each member seen costs one distance and, if closer than ``bound``, an insertion into a
-    sorted list of ``k + 1``.
+    sorted list of ``k``. Distances are computed as cKDTree computes them, so a kd-tree
+    agrees wherever no two distances tie.
     """
     nq = Q.shape[0]
     b2 = bound * bound  # as cKDTree squares its bound
-    keep2 = b2 * (1.0 + TOL)  # also collect the ones just beyond: they decide ambiguity
     d1 = np.full(nq, np.inf)
     i1 = np.full(nq, -1, dtype=np.int64)
     amb1 = np.zeros(nq, dtype=np.bool_)
@@ -232,14 +240,14 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound):
     l_idx = np.empty(nq * k, dtype=np.int64)  # pages only touched as used: ~3 per query
     l_dist = np.empty(nq * k)
     amb = np.zeros(nq, dtype=np.bool_)
-    all_amb = not keep2 * (1.0 + TOL) < reach2
+    all_amb = not b2 < reach2
     buf_xyz = np.empty((64, 3))
     buf_id = np.empty(64, dtype=np.int64)
     sq = np.empty(64)
     near_ones = np.empty(64, dtype=np.int64)
     cnt = 0
-    bs = np.empty(k + 1)
-    bi = np.empty(k + 1, dtype=np.int64)
+    bs = np.empty(max(k, 1))
+    bi = np.empty(max(k, 1), dtype=np.int64)
     for t in range(nq):
         if t == 0 or q_cell[t] != q_cell[t - 1]:
             buf_xyz, buf_id, cnt = _gather(q_cell[t], near_start, near, start, slot, xyz,
@@ -249,63 +257,131 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound):
                 near_ones = np.empty(buf_id.size, dtype=np.int64)
         q = Q[t]
         m = 0
-        for i in range(cnt):  # branch-free: every distance, and which are within keep2
+        for i in range(cnt):  # branch-free: every distance, and which are within the bound
             s = sq_dist(buf_xyz, i, q)
             sq[i] = s
             near_ones[m] = i
-            m += s < keep2
+            m += s < b2
         nb = 0
-        for u in range(m):  # the k + 1 nearest of those, sorted
+        for u in range(m):  # the k nearest of those, sorted
             i = near_ones[u]
             s = sq[i]
-            if nb == k + 1 and s >= bs[k]:
+            c = buf_id[i]
+            if nb == k and not _before(s, c, bs[k - 1], bi[k - 1], tie):
                 continue
-            j = nb if nb < k + 1 else k
-            while j > 0 and bs[j - 1] > s:
+            j = nb if nb < k else k - 1
+            while j > 0 and _before(s, c, bs[j - 1], bi[j - 1], tie):
                 bs[j] = bs[j - 1]
                 bi[j] = bi[j - 1]
                 j -= 1
             bs[j] = s
-            bi[j] = buf_id[i]
-            if nb < k + 1:
+            bi[j] = c
+            if nb < k:
                 nb += 1
-        if nb >= 2:
+        if nb >= 1:
             s1 = bs[0]
-            s2 = bs[1]
             c1 = bi[0]
-        else:  # the nearest two among all seen
+        else:  # the nearest among all seen
             s1 = np.inf
-            a = -1
+            c1 = -1
             for i in range(cnt):
-                if sq[i] < s1:
+                if c1 < 0 or _before(sq[i], buf_id[i], s1, c1, tie):
                     s1 = sq[i]
-                    a = i
-            s2 = np.inf
-            for i in range(cnt):
-                if i != a and sq[i] < s2:
-                    s2 = sq[i]
-            c1 = buf_id[a] if a >= 0 else -1
-        if s2 > reach2:
-            s2 = reach2  # a member beyond reach may be unseen
-        if c1 < 0 or not s2 > s1 * (1.0 + TOL):
-            amb1[t] = True
+                    c1 = buf_id[i]
+        if c1 < 0 or not s1 < reach2:
+            amb1[t] = True  # a nearer member may lie beyond the cells around
         else:
             d1[t] = np.sqrt(s1)
             i1[t] = c1
-        n_in = 0
-        while n_in < nb and n_in < k and bs[n_in] < b2:
-            n_in += 1
-        bad = all_amb or (n_in > 0 and not bs[n_in - 1] < b2 * (1.0 - TOL))  # the bound
-        last = n_in if n_in < nb else n_in - 1  # the listed ones and the next, if any
-        for j in range(last):
-            if not bs[j + 1] > bs[j] * (1.0 + TOL):
-                bad = True  # two (nearly) equal: the kd-tree's order is its own
         used = l_start[t]
-        if bad:
+        if all_amb:
             amb[t] = True
-            n_in = 0
-        for j in range(n_in):
+            nb = 0
+        for j in range(nb):
             l_dist[used + j] = np.sqrt(bs[j])
             l_idx[used + j] = bi[j]
-        l_start[t + 1] = used + n_in
+        l_start[t + 1] = used + nb
     return d1, i1, amb1, l_start, l_idx, l_dist, amb
+
+
+def _flat(balls):
+    """Query and member arrays of a ``query_ball_point`` answer (a list per query)."""
+    sizes = np.fromiter((len(b) for b in balls), dtype=np.int64, count=len(balls))
+    q = np.repeat(np.arange(len(balls), dtype=np.int64), sizes)
+    c = (np.concatenate([np.asarray(b, dtype=np.int64) for b in balls]) if sizes.sum()
+         else np.empty(0, dtype=np.int64))
+    return q, c
+
+
+def _sq(Q, C, q, c):
+    """Squared distances of the pairs ``(q, c)``, rounded as :func:`sq_dist` rounds them."""
+    d = C[c] - Q[q]
+    return d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+
+
+def _first(tie, q, c, s, nq):
+    """Per query, the pair first in :func:`nearest`'s order: ``(d1, i1)``."""
+    d1 = np.full(nq, np.inf)
+    i1 = np.full(nq, -1, dtype=np.int64)
+    np.minimum.at(d1, q, s)
+    at = s == d1[q]
+    q, c = q[at], c[at]
+    o = np.lexsort((c, tie[c], q))
+    q, c = q[o], c[o]
+    lead = np.r_[True, q[1:] != q[:-1]]
+    i1[q[lead]] = c[lead]
+    return np.sqrt(d1), i1
+
+
+def _lists(tie, q, c, s, nq, k, b2):
+    """Per query, the ``k`` pairs first in :func:`nearest`'s order with ``s < b2``, as CSR."""
+    inside = s < b2
+    q, c, s = q[inside], c[inside], s[inside]
+    o = np.lexsort((c, tie[c], s, q))
+    q, c, s = q[o], c[o], s[o]
+    rank = np.arange(q.size) - np.searchsorted(q, q)  # position within its query's list
+    take = rank < k
+    q, c, s = q[take], c[take], s[take]
+    l_start = np.zeros(nq + 1, dtype=np.int64)
+    l_start[1:] = np.cumsum(np.bincount(q, minlength=nq))
+    return l_start, c, np.sqrt(s)
+
+
+#: :func:`exact_search` measures every pair itself up to this many (query, candidate) pairs
+BRUTE_PAIRS = 1 << 21
+
+
+def exact_search(C, tie, Q, k, bound):
+    """:func:`nearest`'s answers for queries the cells cannot settle: ``(d1, i1, start, idx,
+    dist)``, ``i1`` -1 where ``C`` is empty.
+
+    Few queries (at most ``BRUTE_PAIRS`` pairs; the usual case, a few watched points far from
+    every candidate) measure every candidate. Else a kd-tree finds the nearest distance ``d``
+    of each query (to within rounding); every candidate within ``d (1 + 1e-6)``, and within
+    ``bound (1 + 1e-6)`` for the lists, is then measured exactly. Either way they are ordered
+    as :func:`nearest` orders them.
+    """
+    from scipy.spatial import cKDTree
+    nq, m = Q.shape[0], C.shape[0]
+    if m == 0 or nq == 0:
+        return (np.full(nq, np.inf), np.full(nq, -1, dtype=np.int64),
+                np.zeros(nq + 1, dtype=np.int64), np.empty(0, dtype=np.int64), np.empty(0))
+    b2 = bound * bound
+    if nq * m <= BRUTE_PAIRS:
+        S = np.zeros((nq, m))
+        for d in range(3):
+            e = C[None, :, d] - Q[:, d, None]
+            S += e * e  # ((e0² + e1²) + e2²), as sq_dist adds them
+        q, c = np.nonzero(S == S.min(axis=1)[:, None])  # the nearest and its ties
+        d1, i1 = _first(tie, q, c, S[q, c], nq)
+        q, c = np.nonzero(S < b2)
+        return (d1, i1) + _lists(tie, q, c, S[q, c], nq, k, b2)
+    tree = cKDTree(C)
+    dk, _ = tree.query(Q)
+    q, c = _flat(tree.query_ball_point(Q, dk * (1.0 + 1e-6) + 1e-300))
+    d1, i1 = _first(tie, q, c, _sq(Q, C, q, c), nq)
+    if not b2 > 0:
+        return d1, i1, np.zeros(nq + 1, dtype=np.int64), np.empty(0, dtype=np.int64), \
+            np.empty(0)
+    q, c = _flat(tree.query_ball_point(Q, bound * (1.0 + 1e-6)))
+    return (d1, i1) + _lists(tie, q, c, _sq(Q, C, q, c), nq, k, b2)

@@ -24,17 +24,17 @@ Nearest kept points are searched among each input point's ``k`` nearest candidat
 with no candidate left among them counts as uncovered, so a removal that would need a farther
 one is refused (never wrongly allowed).
 
-**Searches.** Written first with a kd-tree (``scipy.spatial.cKDTree``) per round: a build over
-the candidates, a nearest query of every input point, a ``k``-nearest query of the rows and a
-ball query per added point. The results are defined by those queries, including the kd-tree's
-order of equal distances. The candidates change every round but the input points do not, so
-one grid of cells (:mod:`.cell_grid`, side ≥ the first Hausdorff distance, which bounds every
-radius asked) is built once and each round only sorts the candidates into it; the cells give
-the kd-tree's answers bit for bit, and the few points whose answer hangs on the order of
-(nearly) equal distances are asked of the kd-tree, built only in rounds that need it (an added
-point's ball likewise, if a point at its edge could go either way). Where a few wide gaps
-would make the cells hold hundreds of candidates (``MAX_LOAD``), the kd-tree answers every
-search. Tests compare the whole pass with the kd-tree version (``tests/naive.py``).
+**Searches.** Every search is exact, with equal distances decided by the candidates' tie key
+(``tie``) and then their position: "nearest" means smallest (distance, tie), so the result is a
+function of the points and keys alone (:mod:`.cell_grid`). The candidates change every round
+but the input points do not, so one grid of cells (side ≥ the first Hausdorff distance, which
+bounds every radius asked) is built once and each round only sorts the candidates into it.
+Where a few wide gaps would make the cells hold hundreds of candidates (``MAX_LOAD``), or a
+watched point's nearest candidate lies beyond the cells, a kd-tree's superset measured exactly
+answers instead (:func:`.cell_grid.exact_search`). Tests compare the whole pass with a brute
+force version (``tests/naive.py``). Until 2026-12-02 the searches followed cKDTree's own order
+of equal distances: a kd-tree over the candidates in every round for the ~1 % of points with a
+tie, a fifth of a pipeline tile's refinement time.
 """
 
 import numpy as np
@@ -63,7 +63,7 @@ def protected(deviation, threshold):
     return np.asarray(deviation) > PROTECT * threshold
 
 
-#: mean candidates per search (the 27 cells around a point) above which the kd-tree answers
+#: mean candidates per search (the 27 cells around a point) above which a kd-tree answers
 #: instead. Both cost about the same at ~600 (100k scan points, cells 7x the usual side); the
 #: usual is ~10, as the first Hausdorff distance, the cells' side, is ~1.3x the 99th
 #: percentile of the distances (10 cases: CAD parts, scans, pipeline tiles)
@@ -205,10 +205,11 @@ def lists_from_dense(nd, nbr, none):
 def _fill_cells(X, dist, level, cell_of, near_start, near, pt_start, pt, pt_xyz, reach):
     """Add points, farthest first, while ``dist`` exceeds ``level`` (in place), by the cells.
 
-    Returns the added points and ``-1``, or stops before a point whose ball the cells cannot
-    settle as the kd-tree's ball query would and returns it instead of ``-1``: its radius
-    reaches beyond the cells, or a point whose distance would drop lies within rounding of the
-    ball's edge (the kd-tree may leave it out).
+    The farthest point ``x`` (the first of equals, as ``np.argmax``) is added: every point
+    nearer to it than its distance so far takes that distance (all lie within ``dist[x]``, the
+    largest, so in the cells around it while that is below ``reach``). Returns the added
+    points and ``-1``, or stops before a point whose distance reaches beyond the cells and
+    returns it instead of ``-1``.
     """
     far = np.nonzero(dist > level)[0]  # only these can be added: distances only drop
     out = np.empty(far.size, dtype=np.int64)
@@ -230,16 +231,8 @@ def _fill_cells(X, dist, level, cell_of, near_start, near, pt_start, pt, pt_xyz,
             return out[:done], -1
         if not r < reach:
             return out[:done], x
-        r2 = r * r
         q = X[x]
         cell = cell_of[x]
-        for u in range(near_start[cell], near_start[cell + 1]):
-            v = near[u]
-            for i in range(pt_start[v], pt_start[v + 1]):
-                s = cell_grid.sq_dist(pt_xyz, i, q)
-                if r2 * (1.0 - cell_grid.TOL) <= s <= r2 * (1.0 + cell_grid.TOL) and \
-                        np.sqrt(s) < dist[pt[i]]:
-                    return out[:done], x
         for u in range(near_start[cell], near_start[cell + 1]):
             v = near[u]
             for i in range(pt_start[v], pt_start[v + 1]):
@@ -253,9 +246,9 @@ def _fill_cells(X, dist, level, cell_of, near_start, near, pt_start, pt, pt_xyz,
 
 def _fill(X, grid, tree_x, dist, level):
     """Input points to add, farthest first, until all of ``dist`` is within ``level``
-    (``dist`` is updated in place): each added point lowers the distance of the points within
-    its own to its distance from them. By the cells; a point they cannot settle by the
-    kd-tree's ball query (``tree_x()`` builds it once)."""
+    (``dist`` is updated in place): each added point lowers the distance of the points nearer
+    to it to their distance from it. By the cells; a point whose distance reaches beyond them
+    by the kd-tree (``tree_x()`` builds it once) and the same exact distances."""
     added = []
     while True:
         got, x = _fill_cells(X, dist, level, grid.cell_of, grid.near_start, grid.near,
@@ -263,60 +256,51 @@ def _fill(X, grid, tree_x, dist, level):
         added.append(got)
         if x < 0:
             return np.concatenate(added)
-        near = np.asarray(tree_x().query_ball_point(X[x], dist[x]), dtype=np.int64)
+        near = np.asarray(tree_x().query_ball_point(X[x], dist[x] * (1.0 + 1e-6)),
+                          dtype=np.int64)
         if near.size:
-            d = np.linalg.norm(X[near] - X[x], axis=1)
+            e = X[near] - X[x]
+            d = np.sqrt(e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1] + e[:, 2] * e[:, 2])
             np.minimum.at(dist, near, d)
         dist[x] = 0.0
         added.append(np.array([x], dtype=np.int64))
 
 
-def _nearest(X, grid, cand, tree_c, counted, k, level, removable, watched):
+def _nearest(X, grid, cand, cand_tie, counted, k, level, removable, watched):
     """The nearest candidate of every input point, and the ``k`` nearest within ``level`` of
-    each row (a point whose nearest is removable), as ``cKDTree(X[cand]).query`` gives them:
-    by the cells, the ambiguous ones (:mod:`.cell_grid`) by the kd-tree (``tree_c()`` builds
-    it once); all by the kd-tree if ``grid`` is None.
+    each row (a point whose nearest is removable), in :func:`.cell_grid.nearest`'s order
+    (distance, then ``cand_tie``): by the cells, the few they cannot settle (a nearest beyond
+    them) by :func:`.cell_grid.exact_search`; all by it if ``grid`` is None.
 
     ``counted``: ``(ids, xyz, cell)`` of the points that take part, cell by cell. Marks the
     nearest candidate of each watched point beyond ``level`` not ``removable`` (in place).
 
     Returns ``d1`` (n,) (0 where not counted), the lists for :func:`thin_below`, ``rows`` and
     ``at`` (the rows' positions among the lists). The lists are those of every counted point,
-    then the kd-tree's of the rows whose list was ambiguous (left empty at their first place).
-    The lists of points that are not rows start with their nearest candidate, which is not
-    removable, so they never change owner and take no part in any gap.
+    in the order of ``ids``. The lists of points that are not rows start with their nearest
+    candidate, which is not removable, so they never change owner and take no part in any
+    gap.
     """
     ids, Q, q_cell = counted
-    if grid is None:  # every answer from the kd-tree
-        d, o = tree_c().query(Q)
-        amb1 = np.zeros(ids.size, dtype=bool)
-        l_start = np.zeros(ids.size + 1, dtype=np.int64)
-        l_idx, l_dist = np.empty(0, dtype=np.int64), np.empty(0)
-        amb = np.ones(ids.size, dtype=bool)
-    else:
+    C = X[cand]
+    if grid is not None:
         start, slot, xyz = grid.members(X, cand)
         d, o, amb1, l_start, l_idx, l_dist, amb = cell_grid.nearest(
             Q, q_cell, grid.near_start, grid.near, start, slot, xyz, grid.reach * grid.reach,
-            k, level)
-    if amb1.any():
-        a = np.flatnonzero(amb1)
-        d[a], o[a] = tree_c().query(Q[a])
+            k, level, cand_tie)
+        if amb.any():  # the level reaches beyond the cells (not below H, as it always is)
+            grid = None
+        elif amb1.any():  # a nearest beyond the cells, so beyond the level: no list
+            a = np.flatnonzero(amb1)
+            d[a], o[a] = cell_grid.exact_search(C, cand_tie, Q[a], k, 0.0)[:2]
+    if grid is None:
+        d, o, l_start, l_idx, l_dist = cell_grid.exact_search(C, cand_tie, Q, k, level)
     far = watched[ids] & (d > level)
     removable[o[far]] = False  # a watched point beyond the level keeps its nearest
     sel = np.flatnonzero(removable[o])
-    redo = sel[amb[sel]]
-    at = sel.copy()
-    used = l_start[-1]
-    if redo.size:
-        f_start, f_idx, f_dist = lists_from_dense(
-            *tree_c().query(Q[redo], k=k, distance_upper_bound=level), cand.size)
-        at[amb[sel]] = ids.size + np.arange(redo.size)
-        l_start = np.concatenate([l_start, used + f_start[1:]])
-        l_idx = np.concatenate([l_idx[:used], f_idx])
-        l_dist = np.concatenate([l_dist[:used], f_dist])
     d1 = np.zeros(X.shape[0])
     d1[ids] = d
-    return d1, (l_start, l_idx, l_dist), ids[sel], at
+    return d1, (l_start, l_idx, l_dist), ids[sel], sel
 
 
 def _once(make):
@@ -394,8 +378,7 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
     Cost: once, a kd-tree nearest query of every input point and a grid of cells (O(n log n)).
     Per round, O(n): the candidates sorted into the cells, for every input point the
     candidates in the 27 cells around it (a few dozen), the ball of each added point the same
-    way; a kd-tree over the candidates only for points whose answer hangs on equal distances
-    (~1 % on quantised scans); an indexed heap over the kept points. One core: ~0.04 s for
+    way; an indexed heap over the kept points. One core: ~0.04 s for
     Fandisk (16k points at 20 %), ~0.3 s for 100k scan points, 3-5x less than the kd-tree
     version's.
     """
@@ -414,7 +397,7 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
     tree_x = _once(lambda: cKDTree(X))
     ids = grid.pt[~ignored[grid.pt]]  # the points that count, cell by cell
     counted = (ids, np.ascontiguousarray(X[ids]), grid.cell_of[ids])
-    # a few wide gaps make cells that hold hundreds of candidates: the kd-tree is then faster
+    # a few wide gaps make cells that hold hundreds of candidates: a kd-tree is then faster
     search_grid = grid if grid.load(np.flatnonzero(keep), ids) <= MAX_LOAD else None
     while info["rounds"] < max_rounds and step >= min_step and H > 0:
         info["rounds"] += 1
@@ -425,12 +408,10 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         cand = np.concatenate([np.flatnonzero(keep), added])
         removable = ~fixed[cand]
         removable[cand.size - added.size:] = False
-        tree_c = _once(lambda: cKDTree(X[cand]))
-        d1, lists, rows, at = _nearest(X, search_grid, cand, tree_c, counted,
+        cand_tie = np.ascontiguousarray(tie[cand], dtype=np.uint64)
+        d1, lists, rows, at = _nearest(X, search_grid, cand, cand_tie, counted,
                                        min(k, cand.size), level, removable, watched)
-        gone, d_lists = thin_below(*lists, removable,
-                                  np.ascontiguousarray(tie[cand], dtype=np.uint64), level,
-                                  added.size)
+        gone, d_lists = thin_below(*lists, removable, cand_tie, level, added.size)
         if gone.size < added.size:
             step *= 0.5
             continue
