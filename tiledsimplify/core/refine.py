@@ -282,7 +282,6 @@ def _nearest(X, grid, cand, cand_tie, counted, k, level, removable, watched):
     gap.
     """
     ids, Q, q_cell = counted
-    C = X[cand]
     if grid is not None:
         start, slot, xyz = grid.members(X, cand)
         d, o, amb1, l_start, l_idx, l_dist, amb = cell_grid.nearest(
@@ -292,9 +291,9 @@ def _nearest(X, grid, cand, cand_tie, counted, k, level, removable, watched):
             grid = None
         elif amb1.any():  # a nearest beyond the cells, so beyond the level: no list
             a = np.flatnonzero(amb1)
-            d[a], o[a] = cell_grid.exact_search(C, cand_tie, Q[a], k, 0.0)[:2]
+            d[a], o[a] = cell_grid.exact_search(X[cand], cand_tie, Q[a], k, 0.0)[:2]
     if grid is None:
-        d, o, l_start, l_idx, l_dist = cell_grid.exact_search(C, cand_tie, Q, k, level)
+        d, o, l_start, l_idx, l_dist = cell_grid.exact_search(X[cand], cand_tie, Q, k, level)
     far = watched[ids] & (d > level)
     removable[o[far]] = False  # a watched point beyond the level keeps its nearest
     sel = np.flatnonzero(removable[o])
