@@ -423,3 +423,16 @@ def test_refine_phases_never_put_neighbours_together():
         assert phase[i] == min(set(range(len(used) + 1)) - used)
     assert phase.max() + 1 < plan.n_tiles / 2  # phases stay few: tiles refine in parallel
     np.testing.assert_array_equal(phase, refine_phases(plan, 0.05))
+
+
+def test_default_tile_size_is_an_eighth_of_the_input_within_bounds(bunny, tmp_path):
+    from tiledsimplify.pipeline.run import default_tile_points
+    assert default_tile_points(1_000_000) == 125_000
+    assert default_tile_points(999_999) == 125_000
+    assert default_tile_points(50_000) == 100_000
+    assert default_tile_points(10_000_000) == 500_000
+    X, path = bunny
+    store = tmp_path / "store"
+    s = run(path, tmp_path / "out.npy", ratio=0.2, store=store)  # small: one tile
+    ts = TileStore.open(store)
+    assert s.n_tiles == 1 and ts.config["tile_points"] == 100_000

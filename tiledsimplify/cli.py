@@ -72,7 +72,8 @@ def _parser():
     r.add_argument("--workers", type=int, default=None, help="local workers")
     r.add_argument("--store", default=None,
                    help="zarr tile store directory (default: temporary); reuse it to resume")
-    r.add_argument("--tile-points", type=int, default=None, help="points per tile (500000)")
+    r.add_argument("--tile-points", type=int, default=None, help="points per tile (default: an eighth of the input, "
+                                         "100000 to 500000)")
     r.add_argument("--halo", type=float, default=None,
                    help="halo width in model units (default: 10 x estimated spacing)")
     r.add_argument("--mode", choices=MODES, default=None,
@@ -211,7 +212,7 @@ def _run(args):
     summary = run(args.input, args.output, ratio=run_cfg.get("ratio"),
                   count=run_cfg.get("count"), options=SimplifyOptions.from_mapping(simplify_cfg),
                   scheduler=run_cfg.get("scheduler", "threads"), workers=run_cfg.get("workers"),
-                  store=args.store, tile_points=run_cfg.get("tile_points", 500_000),
+                  store=args.store, tile_points=run_cfg.get("tile_points"),
                   halo=run_cfg.get("halo"), floor=run_cfg.get("floor", 0.5),
                   progress=not (args.no_progress or args.quiet))
     return EXIT_OK if summary.reached else EXIT_BUDGET
