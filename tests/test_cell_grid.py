@@ -85,6 +85,12 @@ def test_nearest_beyond_the_cells_is_left_to_the_caller():
     assert amb1.tolist() == [False, False, True]  # point 2's nearest is 5 away: not seen
     assert i[:2].tolist() == [0, 0] and d[1] == 0.1
     assert start.tolist() == [0, 1, 2, 2] and not amb.any()
+    # k = 0: the nearest alone, no lists
+    d, i, amb1, start, idx, dist, amb = cell_grid.nearest(
+        X, grid.cell_of, grid.near_start, grid.near, start_c, slot, xyz, grid.reach ** 2, 0,
+        0.5, np.zeros(1, dtype=np.uint64))
+    assert i[:2].tolist() == [0, 0] and amb1.tolist() == [False, False, True]
+    assert start.tolist() == [0, 0, 0, 0]
 
 
 def test_cells_hold_every_pair_within_reach():

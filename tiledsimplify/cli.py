@@ -72,8 +72,8 @@ def _parser():
     r.add_argument("--workers", type=int, default=None, help="local workers")
     r.add_argument("--store", default=None,
                    help="zarr tile store directory (default: temporary); reuse it to resume")
-    r.add_argument("--tile-points", type=int, default=None, help="points per tile (default: an eighth of the input, "
-                                         "100000 to 500000)")
+    r.add_argument("--tile-points", type=int, default=None,
+                   help="points per tile (default: an eighth of the input, 100000 to 500000)")
     r.add_argument("--halo", type=float, default=None,
                    help="halo width in model units (default: 10 x estimated spacing)")
     r.add_argument("--mode", choices=MODES, default=None,

@@ -205,7 +205,8 @@ def _before(s, c, s2, c2, tie):
 def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, tie):
     """Nearest members of each query point ``Q`` (q, 3): the nearest, and the ``k`` nearest
     closer than ``bound``, nearest first — in the exact order of (squared distance, ``tie``,
-    position), ``tie`` (uint64, one per member position) breaking equal distances.
+    position), ``tie`` (uint64, indexed like ``slot``'s values: one per candidate) breaking
+    equal distances.
 
     ``q_cell``: the cell of each query point; queries in the same cell one after another
     (e.g. in the order of :attr:`CellGrid.pt`) share one gathering of the members around it,
@@ -267,8 +268,8 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, tie
             i = near_ones[u]
             s = sq[i]
             c = buf_id[i]
-            if nb == k and not _before(s, c, bs[k - 1], bi[k - 1], tie):
-                continue
+            if nb == k and (k == 0 or not _before(s, c, bs[k - 1], bi[k - 1], tie)):
+                continue  # full (k = 0: no lists, the nearest only)
             j = nb if nb < k else k - 1
             while j > 0 and _before(s, c, bs[j - 1], bi[j - 1], tie):
                 bs[j] = bs[j - 1]

@@ -287,7 +287,7 @@ def _nearest(X, grid, cand, cand_tie, counted, k, level, removable, watched):
         d, o, amb1, l_start, l_idx, l_dist, amb = cell_grid.nearest(
             Q, q_cell, grid.near_start, grid.near, start, slot, xyz, grid.reach * grid.reach,
             k, level, cand_tie)
-        if amb.any():  # the level reaches beyond the cells (not below H, as it always is)
+        if amb.any():  # the level reaches beyond the cells (never: it stays below H < reach)
             grid = None
         elif amb1.any():  # a nearest beyond the cells, so beyond the level: no list
             a = np.flatnonzero(amb1)

@@ -222,7 +222,7 @@ def default_tile_points(n):
     A function of the input alone, so the tiles (and the output) do not depend on the worker
     count. At least eight tiles keep two workers busy to the end — a 1M-point scan in 3 tiles of
     at most 500k left one idle for the last tile and ran its refinement's phases one after
-    another (2 workers: 40.9 / 44.6 s, peak 0.8 GB, against 38.4 / 36.6 s and 0.5-0.6 GB in 12
+    another (2 workers: 40.9 / 44.6 s, peak 0.8 GB, against 38.4 / 36.6 s and 0.52-0.63 GB in 12
     tiles of at most 125k); below 100k points a tile's halo grows large beside its core.
     """
     return int(min(MAX_TILE_POINTS, max(MIN_TILE_POINTS, math.ceil(n / MIN_TILES))))
