@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from tiledsimplify.errors import FileFormatError
+from tiledsimplify.errors import FileFormatError, InputError
 from tiledsimplify.io import read_points
 from tiledsimplify.io.points_out import write_points
 from tiledsimplify.io.sources import ArraySource, ColumnsSource, TextSource, open_source
@@ -67,3 +67,22 @@ def test_truncated_inputs_fail_naming_the_file(tmp_path, cloud):
     bad.write_text("x y z\n1 2 3\n4 five 6\n")
     with pytest.raises(FileFormatError, match="b.xyz"):
         list(open_source(bad).chunks())
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".xyz", ".npy"])
+def test_non_finite_points_fail_naming_the_file_and_the_point(tmp_path, cloud, suffix):
+    bad = cloud.copy()
+    bad[257, 1] = np.nan
+    bad[900, 2] = np.inf
+    path = tmp_path / f"n{suffix}"
+    if suffix == ".npy":
+        np.save(path, bad)
+    else:
+        write_points(path, bad)
+    src = open_source(path, chunk_points=100)
+    chunks = src.chunks()
+    assert next(chunks)[0] == 0 and next(chunks)[0] == 100  # points before the bad one pass
+    with pytest.raises(InputError, match=rf"n\{suffix}: point 257 has a NaN or infinite"):
+        next(chunks)
+    with pytest.raises(InputError, match=r"point 257 .*\(2 in points 0-999\)"):
+        list(open_source(path, chunk_points=1000).chunks())

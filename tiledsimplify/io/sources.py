@@ -11,11 +11,25 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FileFormatError
+from ..errors import FileFormatError, InputError
 from .las import LasSource, las_files
 from .mesh import _PLY_TYPES, _parse_ply_header, read_points
 
 TEXT_SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".asc")
+
+
+def _finite(xyz, start, files):
+    """``xyz`` (a chunk starting at input row ``start``) if every coordinate is finite; else an
+    :class:`InputError` naming the file, the first bad point and how many the chunk holds."""
+    bad = ~np.isfinite(xyz).all(axis=1)
+    if bad.any():
+        rows = np.flatnonzero(bad)
+        name = str(files[0]) if files else "the input"
+        more = f" ({rows.size} in points {start}-{start + len(xyz) - 1})" if rows.size > 1 else ""
+        raise InputError(f"{name}: point {start + rows[0]} has a NaN or infinite coordinate "
+                         f"{tuple(float(v) for v in xyz[rows[0]])}{more}; drop or fix those "
+                         "points and run again.")
+    return xyz
 
 
 class ArraySource:
@@ -38,7 +52,8 @@ class ArraySource:
     def chunks(self):
         for start in range(0, self.count, self.chunk_points):
             stop = min(start + self.chunk_points, self.count)
-            yield start, np.ascontiguousarray(self._xyz[start:stop, :3], dtype=np.float64), {}
+            xyz = np.ascontiguousarray(self._xyz[start:stop, :3], dtype=np.float64)
+            yield start, _finite(xyz, start, self.files), {}
 
 
 class ColumnsSource(ArraySource):
@@ -47,8 +62,8 @@ class ColumnsSource(ArraySource):
     def chunks(self):
         for start in range(0, self.count, self.chunk_points):
             part = self._xyz[start:start + self.chunk_points]
-            yield start, np.stack([part["x"], part["y"], part["z"]], axis=1).astype(
-                np.float64), {}
+            xyz = np.stack([part["x"], part["y"], part["z"]], axis=1).astype(np.float64)
+            yield start, _finite(xyz, start, self.files), {}
 
 
 class TextSource:
@@ -88,7 +103,7 @@ class TextSource:
                 except ValueError as exc:
                     raise FileFormatError(f"{path}: unreadable point line near point {start} "
                                           f"({exc}); fix or remove it.") from None
-                yield start, xyz, {}
+                yield start, _finite(xyz, start, self.files), {}
                 start += m
 
 

@@ -194,8 +194,9 @@ class _ChunkChecker:
                 raise InputError(f"a chunk's xyz must be float64, got {xyz.dtype}")
             xyz = xyz.astype(np.float64)
         if not np.isfinite(xyz).all():
-            raise InputError(f"the chunk starting at {start} has NaN or infinite coordinates; "
-                             "drop those points before tiling")
+            row = start + int(np.flatnonzero(~np.isfinite(xyz).all(axis=1))[0])
+            raise InputError(f"point {row} (in the chunk starting at {start}) has a NaN or "
+                             "infinite coordinate; drop those points before tiling")
         m = xyz.shape[0]
         if attrs is None:
             attrs = {}
