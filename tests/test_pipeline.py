@@ -436,3 +436,13 @@ def test_default_tile_size_is_an_eighth_of_the_input_within_bounds(bunny, tmp_pa
     s = run(path, tmp_path / "out.npy", ratio=0.2, store=store)  # small: one tile
     ts = TileStore.open(store)
     assert s.n_tiles == 1 and ts.config["tile_points"] == 100_000
+
+
+def test_a_target_of_zero_points_keeps_none_without_a_refinement_warning(tmp_path, caplog):
+    path = tmp_path / "few.npy"
+    np.save(path, np.random.default_rng(3).random((4, 3)))
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        summary = run(path, tmp_path / "out.npy", ratio=0.1, workers=1, progress=False)
+    assert summary.target == 0 and summary.n_output == 0
+    assert len(np.load(tmp_path / "out.npy")) == 0
+    assert not [r for r in caplog.records if r.levelname == "WARNING"]

@@ -404,7 +404,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             ts.delete_state(i)
         stage("budget")
         refined = False
-        if options.refines and 0 < n_removed == n - target:
+        if options.refines and target > 0 and 0 < n_removed == n - target:  # something to swap
             refined = _refine(ts, store_path, prefix, scheduler, workers, client, progress)
         stage("refine")
         n_out, n_boundary = _write_output(ts, source, output, prefix, refined)
