@@ -150,3 +150,20 @@ def test_empty_input_is_an_error(tmp_path, caplog):
         assert main([command, str(empty), str(out), "--ratio", "0.5"]) == EXIT_INPUT
         assert "empty.ply: the input has no points" in caplog.text
         assert not out.exists()
+
+
+def test_a_corrupt_laz_is_reported_once(tmp_path, caplog):
+    import laspy
+    las = laspy.LasData(laspy.LasHeader(point_format=0, version="1.2"))
+    xyz = np.random.default_rng(0).random((3000, 3))
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    good = tmp_path / "good.laz"
+    las.write(good)
+    bad = tmp_path / "cut.laz"
+    bad.write_bytes(good.read_bytes()[:2000])
+    with caplog.at_level("INFO"):
+        assert main(["run", str(bad), str(tmp_path / "out.laz"), "--ratio", "0.5",
+                     "--no-progress"]) == EXIT_INPUT
+    errors = [r for r in caplog.records if r.levelname == "ERROR"]
+    assert len(errors) == 1 and errors[0].name == "tiledsimplify"  # not laspy's own line too
+    assert "cut.laz" in errors[0].getMessage() and "corrupt" in errors[0].getMessage()

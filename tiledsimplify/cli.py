@@ -256,6 +256,8 @@ def main(argv=None):
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
                         format="%(asctime)s %(levelname)s %(message)s", stream=sys.stderr)
+    # laspy logs a read error before raising it; the error we report quotes it with the file
+    logging.getLogger("laspy").setLevel(logging.CRITICAL)
     try:
         command = {"run": _run, "simplify": _simplify, "evaluate": _evaluate,
                    "report": _report, "compile": _compile}[args.command]
