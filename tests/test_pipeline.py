@@ -8,6 +8,7 @@ import pytest
 from tiledsimplify import simplify_points
 from tiledsimplify.cli import EXIT_OK, main
 from tiledsimplify.core import edge_fit
+from tiledsimplify.errors import InputError
 from tiledsimplify.io import read_points
 from tiledsimplify.pipeline import run
 from tiledsimplify.pipeline.budget import deeper_tiles, global_cut, kept_mask, store_cut
@@ -204,7 +205,8 @@ def test_same_output_for_every_scheduler(bunny, tmp_path, cluster, caplog):
     for name, kw in [("threads", {"scheduler": "threads", "workers": 2}),
                      ("synchronous", {"scheduler": "synchronous"}),
                      ("processes", {"scheduler": "processes", "workers": 2}),
-                     ("cluster", {"client": cluster})]:
+                     ("cluster", {"client": cluster}),
+                     ("address", {"scheduler": cluster.scheduler.address})]:
         out = tmp_path / f"{name}.npy"
         caplog.clear()
         with caplog.at_level("INFO", logger="tiledsimplify"):
@@ -300,7 +302,7 @@ def test_las_end_to_end_keeps_every_dimension(data_dir, tmp_path):
     assert int(np.asarray(b["sharp_edge"]).sum()) == s.n_boundary
 
 
-def test_cli_run_with_config(bunny, tmp_path):
+def test_cli_run_with_config(bunny, tmp_path, caplog):
     X, path = bunny
     cfg = tmp_path / "c.toml"
     cfg.write_text("[run]\nratio = 0.3\ntile_points = 2000\nfloor = 0.3\n"
@@ -316,6 +318,18 @@ def test_cli_run_with_config(bunny, tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[runn]\nratio = 0.3\n")
     assert main(["run", str(path), str(out), "--config", str(bad), "-q"]) == 2
+    bad.write_text("[simplify]\nedge_width = 'wide'\n")  # a wrong type names file and key
+    with caplog.at_level("ERROR", logger="tiledsimplify"):
+        assert main(["run", str(path), str(out), "--ratio", "0.3", "--config", str(bad),
+                     "-q"]) == 2
+    assert "bad.toml: [simplify] options.edge_width must be a number, got 'wide'" in caplog.text
+    bad.write_text("[run]\nworkers = 'two'\n")
+    with caplog.at_level("ERROR", logger="tiledsimplify"):
+        assert main(["run", str(path), str(out), "--ratio", "0.3", "--config", str(bad),
+                     "-q"]) == 2
+    assert "bad.toml: [run] workers must be a number, got 'two'" in caplog.text
+    with pytest.raises(InputError, match="tile_points must be a whole number, got 2.5"):
+        run(path, out, ratio=0.3, tile_points=2.5)  # not 2-point tiles
 
 
 @pytest.mark.parametrize("case", ["bunny", "fandisk_scan"])
@@ -446,3 +460,16 @@ def test_a_target_of_zero_points_keeps_none_without_a_refinement_warning(tmp_pat
     assert summary.target == 0 and summary.n_output == 0
     assert len(np.load(tmp_path / "out.npy")) == 0
     assert not [r for r in caplog.records if r.levelname == "WARNING"]
+
+
+def test_an_unreachable_scheduler_fails_before_any_work(bunny, tmp_path):
+    import dask
+    from tiledsimplify.errors import TiledSimplifyError
+    X, path = bunny
+    store = tmp_path / "store.zarr"
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        with pytest.raises(TiledSimplifyError, match=r"tcp://127.0.0.1:9: no dask scheduler "
+                                                     r"answered.*dask worker"):
+            run(path, tmp_path / "out.npy", ratio=0.2, scheduler="tcp://127.0.0.1:9",
+                store=store)
+    assert not store.exists() and not (tmp_path / "out.npy").exists()

@@ -117,6 +117,23 @@ def test_saved_neighbourhood_state_gives_the_same_run():
         SimplifyOptions(progressive_until=float("nan"))
 
 
+@pytest.mark.parametrize("bad,message", [
+    ({"edge_width": "wide"}, "edge_width must be a number, got 'wide'"),
+    ({"spacing": True}, "spacing must be a number or None, got True"),
+    ({"reach": "inf"}, "reach must be a number or None"),
+    ({"boundary_k": None}, "boundary_k must be a number, got None"),
+    ({"refine": "yes"}, "refine must be true or false or None"),
+    ({"progressive": 1}, "progressive must be true or false, got 1"),
+    ({"mode": 3}, "mode must be a name"),
+])
+def test_options_of_the_wrong_type_are_named(bad, message):
+    with pytest.raises(InputError, match=message):
+        SimplifyOptions.from_mapping(bad)
+    ok = SimplifyOptions(edge_width=1, spacing=np.float64(2.0), reach=float("inf"),
+                         detect_boundary=np.bool_(True))  # ints and numpy scalars are fine
+    assert ok.edge_width == 1 and ok.reach_spacings == float("inf")
+
+
 def test_frozen_points_are_kept_and_still_neighbours():
     X = _surface(2000, seed=1)
     frozen = X[:, 0] < 1.0

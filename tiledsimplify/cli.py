@@ -17,7 +17,7 @@ import numpy as np
 from . import __version__
 from .core import SimplifyOptions, compile_cache, simplify_points
 from .core.options import MODES
-from .errors import BudgetWarning, TiledSimplifyError
+from .errors import BudgetWarning, InputError, TiledSimplifyError
 from .io import read_points
 from .io.points_out import check_output, write_points
 
@@ -200,6 +200,14 @@ def _run(args):
     if unknown:
         raise TiledSimplifyError(f"{args.config}: unknown [run] key(s) {unknown}; known: "
                                  f"{sorted(known)}.")
+    kinds = {"ratio": (int, float), "count": (int, float), "tile_points": (int, float),
+             "workers": (int, float), "halo": (int, float), "floor": (int, float),
+             "scheduler": (str,)}
+    for key, value in run_cfg.items():
+        if isinstance(value, bool) or not isinstance(value, kinds[key]):
+            raise TiledSimplifyError(
+                f"{args.config}: [run] {key} must be "
+                f"{'a name' if key == 'scheduler' else 'a number'}, got {value!r}.")
     for key in known:  # command line wins over the config file
         value = getattr(args, key)
         if value is not None:
@@ -209,8 +217,14 @@ def _run(args):
         run_cfg.pop("count" if args.ratio is not None else "ratio")
     if args.mode is not None:
         simplify_cfg = {**simplify_cfg, "mode": args.mode}
+    try:
+        options = SimplifyOptions.from_mapping(simplify_cfg)
+    except InputError as exc:
+        if not args.config:
+            raise
+        raise InputError(f"{args.config}: [simplify] {exc}") from None
     summary = run(args.input, args.output, ratio=run_cfg.get("ratio"),
-                  count=run_cfg.get("count"), options=SimplifyOptions.from_mapping(simplify_cfg),
+                  count=run_cfg.get("count"), options=options,
                   scheduler=run_cfg.get("scheduler", "threads"), workers=run_cfg.get("workers"),
                   store=args.store, tile_points=run_cfg.get("tile_points"),
                   halo=run_cfg.get("halo"), floor=run_cfg.get("floor", 0.5),

@@ -3,6 +3,8 @@
 import numbers
 from dataclasses import dataclass, fields
 
+import numpy as np
+
 from ..errors import InputError
 from .boundary import FLOOR, K_SIGMA
 from .edge_fit import WIDTH
@@ -123,6 +125,20 @@ class SimplifyOptions:
     refine: bool | None = None
 
     def __post_init__(self):
+        for f in fields(self):  # a config file can give any type: say which option is wrong
+            value = getattr(self, f.name)
+            kind = getattr(f.type, "__name__", None) or str(f.type)  # "float", "float | None"
+            if value is None and "None" in kind:
+                continue
+            if kind.startswith("float") and (isinstance(value, bool)
+                                             or not isinstance(value, numbers.Real)):
+                raise InputError(f"options.{f.name} must be a number"
+                                 f"{' or None' if 'None' in kind else ''}, got {value!r}.")
+            if kind.startswith("bool") and not isinstance(value, (bool, np.bool_)):
+                raise InputError(f"options.{f.name} must be true or false"
+                                 f"{' or None' if 'None' in kind else ''}, got {value!r}.")
+            if kind.startswith("str") and not isinstance(value, str):
+                raise InputError(f"options.{f.name} must be a name (a string), got {value!r}.")
         if self.mode not in MODES:
             raise InputError(f"options.mode must be one of {MODES}, got {self.mode!r}.")
         if self.importance is None:

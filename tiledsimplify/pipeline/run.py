@@ -123,6 +123,31 @@ class _Progress:
             self.out.flush()
 
 
+def _whole(value, name):
+    """``value`` as an int if it is a whole number (``1e6`` from a config file too), else an
+    error naming the parameter; None stays None."""
+    if value is None:
+        return None
+    if not isinstance(value, (bool, np.bool_)) and isinstance(value, (int, np.integer, float,
+                                                                       np.floating)):
+        if float(value).is_integer():
+            return int(value)
+    raise InputError(f"{name} must be a whole number, got {value!r}.")
+
+
+def _connect(address):
+    """A dask.distributed client of the scheduler at ``address``, or an error saying how to
+    start one: checked before any work, so a wrong address does not fail after the ingest."""
+    from distributed import Client
+    try:
+        return Client(address)
+    except (OSError, TimeoutError) as exc:
+        raise TiledSimplifyError(
+            f"{address}: no dask scheduler answered ({exc}). Start one (`dask scheduler`, then "
+            f"`dask worker {address}` on each machine) or give the address it prints; "
+            "--scheduler threads runs on this machine alone.") from None
+
+
 def _start_compile(client, scheduler, workers):
     """On a cold kernel cache with local workers: compile every kernel in ``workers``
     processes while the input is ingested (:func:`..core.compile_cache.start`). Not for a
@@ -303,6 +328,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"{output}: LAS/LAZ output needs LAS/LAZ input (it keeps the input's "
                          "point records); write .ply, .npy, .xyz or .csv instead.")
     check_output(output, LAS_SUFFIXES)
+    tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
     if tile_points is None:
         tile_points = default_tile_points(n)
     opts = asdict(options)
@@ -310,6 +336,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 "version": __version__}
     fp = _fingerprint(source, settings)
 
+    own_client = None
+    if client is None and isinstance(scheduler, str) and scheduler.startswith("tcp://"):
+        client = own_client = _connect(scheduler)  # one connection for every stage
     warming = _start_compile(client, scheduler, workers)
     tmp = None
     if store is None:
@@ -412,6 +441,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     finally:
         if tmp is not None:
             tmp.cleanup()
+        if own_client is not None:
+            own_client.close()
     seconds["total"] = time.perf_counter() - t_start
     cpu_seconds["total"] = sum(cpu_seconds.values())
     reached = n - n_removed == target
