@@ -167,3 +167,16 @@ def test_a_corrupt_laz_is_reported_once(tmp_path, caplog):
     errors = [r for r in caplog.records if r.levelname == "ERROR"]
     assert len(errors) == 1 and errors[0].name == "tiledsimplify"  # not laspy's own line too
     assert "cut.laz" in errors[0].getMessage() and "corrupt" in errors[0].getMessage()
+
+
+def test_non_finite_points_are_named_by_file_and_row(cloud, tmp_path, caplog):
+    X, path = cloud
+    bad = X.copy()
+    bad[7, 2] = np.inf
+    nan_path = tmp_path / "holes.npy"
+    np.save(nan_path, bad)
+    with caplog.at_level("ERROR", logger="tiledsimplify"):
+        assert main(["simplify", str(nan_path), str(tmp_path / "o.ply"), "--ratio", "0.5",
+                     "-q"]) == EXIT_INPUT
+        assert main(["evaluate", str(path), str(nan_path)]) == EXIT_INPUT
+    assert caplog.text.count("holes.npy: point 7 has a NaN or infinite coordinate") == 2

@@ -20,6 +20,7 @@ from .core.options import MODES
 from .errors import BudgetWarning, InputError, TiledSimplifyError
 from .io import read_points
 from .io.points_out import check_output, write_points
+from .io.sources import check_finite
 
 log = logging.getLogger("tiledsimplify")
 
@@ -163,7 +164,8 @@ def _evaluate(args):
 
     from . import metrics, synthetic
     from .io import read_mesh
-    original, kept = read_points(args.original), read_points(args.simplified)
+    original = check_finite(read_points(args.original), 0, [args.original])
+    kept = check_finite(read_points(args.simplified), 0, [args.simplified])
     kw = {"spacing": args.spacing}
     if args.mesh:
         V, F = read_mesh(args.mesh)
@@ -235,7 +237,7 @@ def _run(args):
 def _simplify(args):
     t0 = time.perf_counter()
     check_output(args.output)
-    xyz = read_points(args.input)
+    xyz = check_finite(read_points(args.input), 0, [args.input])
     log.info("read %d points from %s in %.2f s", len(xyz), args.input, time.perf_counter() - t0)
     if len(xyz) == 0:
         raise TiledSimplifyError(f"{args.input}: the input has no points; nothing to simplify. "

@@ -18,7 +18,7 @@ from .mesh import _PLY_TYPES, _parse_ply_header, read_points
 TEXT_SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".asc")
 
 
-def _finite(xyz, start, files):
+def check_finite(xyz, start, files):
     """``xyz`` (a chunk starting at input row ``start``) if every coordinate is finite; else an
     :class:`InputError` naming the file, the first bad point and how many the chunk holds."""
     bad = ~np.isfinite(xyz).all(axis=1)
@@ -53,7 +53,7 @@ class ArraySource:
         for start in range(0, self.count, self.chunk_points):
             stop = min(start + self.chunk_points, self.count)
             xyz = np.ascontiguousarray(self._xyz[start:stop, :3], dtype=np.float64)
-            yield start, _finite(xyz, start, self.files), {}
+            yield start, check_finite(xyz, start, self.files), {}
 
 
 class ColumnsSource(ArraySource):
@@ -63,7 +63,7 @@ class ColumnsSource(ArraySource):
         for start in range(0, self.count, self.chunk_points):
             part = self._xyz[start:start + self.chunk_points]
             xyz = np.stack([part["x"], part["y"], part["z"]], axis=1).astype(np.float64)
-            yield start, _finite(xyz, start, self.files), {}
+            yield start, check_finite(xyz, start, self.files), {}
 
 
 class TextSource:
@@ -103,7 +103,7 @@ class TextSource:
                 except ValueError as exc:
                     raise FileFormatError(f"{path}: unreadable point line near point {start} "
                                           f"({exc}); fix or remove it.") from None
-                yield start, _finite(xyz, start, self.files), {}
+                yield start, check_finite(xyz, start, self.files), {}
                 start += m
 
 
