@@ -180,3 +180,18 @@ def test_non_finite_points_are_named_by_file_and_row(cloud, tmp_path, caplog):
                      "-q"]) == EXIT_INPUT
         assert main(["evaluate", str(path), str(nan_path)]) == EXIT_INPUT
     assert caplog.text.count("holes.npy: point 7 has a NaN or infinite coordinate") == 2
+
+
+def test_run_writes_a_json_summary_for_pipelines(cloud, tmp_path):
+    import json
+    X, path = cloud
+    out, summary = tmp_path / "o.npy", tmp_path / "run.json"
+    assert main(["run", str(path), str(out), "--ratio", "0.25", "--summary", str(summary),
+                 "--no-progress", "-q"]) == EXIT_OK
+    got = json.loads(summary.read_text())
+    assert got["exit_code"] == EXIT_OK and got["input"] == str(path)
+    assert got["n_input"] == len(X) and got["n_output"] == len(np.load(out)) == got["target"]
+    assert got["seconds"]["total"] > 0 and not list(tmp_path.glob(".run.json.*"))
+    missing = tmp_path / "no_such_dir" / "run.json"
+    assert main(["run", str(path), str(out), "--ratio", "0.25", "--summary", str(missing),
+                 "-q"]) == EXIT_INPUT

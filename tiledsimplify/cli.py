@@ -11,6 +11,7 @@ import os
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -83,6 +84,9 @@ def _parser():
                    help="each tile first runs down to this fraction of the target ratio "
                         "(0.5); tiles the global cut needs deeper run again. Changes the "
                         "time, never the output")
+    r.add_argument("--summary", default=None, metavar="FILE.json",
+                   help="also write what the run did as JSON (counts, threshold, spacing, "
+                        "seconds per stage, exit code), for pipelines")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
 
@@ -225,13 +229,40 @@ def _run(args):
         if not args.config:
             raise
         raise InputError(f"{args.config}: [simplify] {exc}") from None
+    if args.summary:
+        _check_summary_path(Path(args.summary))
     summary = run(args.input, args.output, ratio=run_cfg.get("ratio"),
                   count=run_cfg.get("count"), options=options,
                   scheduler=run_cfg.get("scheduler", "threads"), workers=run_cfg.get("workers"),
                   store=args.store, tile_points=run_cfg.get("tile_points"),
                   halo=run_cfg.get("halo"), floor=run_cfg.get("floor", 0.5),
                   progress=not (args.no_progress or args.quiet))
-    return EXIT_OK if summary.reached else EXIT_BUDGET
+    code = EXIT_OK if summary.reached else EXIT_BUDGET
+    if args.summary:
+        _write_summary(Path(args.summary), {"input": str(args.input), "version": __version__,
+                                            **summary.to_dict(), "exit_code": code})
+    return code
+
+
+def _check_summary_path(path):
+    if not path.parent.is_dir():
+        raise TiledSimplifyError(f"{path}: the summary's directory {path.parent} does not "
+                                 "exist; create it or write the summary somewhere else.")
+    if path.is_dir():
+        raise TiledSimplifyError(f"{path}: is a directory; give a file name for the summary.")
+
+
+def _write_summary(path, summary):
+    """The run's summary as JSON, written to a temporary name and renamed: a reader never
+    sees half a file."""
+    import json
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(json.dumps(summary, indent=2, default=str) + "\n")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    log.info("wrote the run summary to %s", path)
 
 
 def _simplify(args):
