@@ -123,6 +123,13 @@ def test_all_points_output_and_foreign_result(block, tmp_path):
     assert rep.metrics["hausdorff"] == pytest.approx(metrics.hausdorff_distance(X, moved))
     assert "not all input points" in (tmp_path / "b" / "report.md").read_text()
 
+    # a result with a NaN point: named with its file and row, not matplotlib's complaint
+    broken = tmp_path / "broken.xyz"
+    moved[3, 0] = np.nan
+    np.savetxt(broken, moved)
+    with pytest.raises(ValueError, match=r"broken.xyz: point 3 has a NaN"):
+        make_report(src, broken, tmp_path / "c", dpi=40)
+
 
 def test_read_columns_round_trip(tmp_path):
     rng = np.random.default_rng(0)

@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from .errors import TiledSimplifyError
 from .io.columns import read_columns
-from .io.sources import open_source
+from .io.sources import check_finite, open_source
 
 PANEL_INCHES = 6.0
 DPI = 150
@@ -350,6 +350,7 @@ def make_report(input_path, result_path, out_dir, *, mesh=None, spacing=None, up
     out.mkdir(parents=True, exist_ok=True)
     original, is_las = _read_input(input_path)
     result_xyz, cols = read_columns(result_path)
+    check_finite(result_xyz, 0, [result_path])
     if len(result_xyz) == 0:
         raise TiledSimplifyError(f"{result_path}: the result has no points; nothing to report.")
     keep, kept_xyz, boundary, notes = _resolve(original, result_xyz, cols)
