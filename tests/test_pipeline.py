@@ -473,3 +473,16 @@ def test_an_unreachable_scheduler_fails_before_any_work(bunny, tmp_path):
             run(path, tmp_path / "out.npy", ratio=0.2, scheduler="tcp://127.0.0.1:9",
                 store=store)
     assert not store.exists() and not (tmp_path / "out.npy").exists()
+
+
+def test_a_store_in_use_by_another_run_is_refused(bunny, tmp_path):
+    from tiledsimplify.pipeline.run import _exclusive
+    X, path = bunny
+    store = tmp_path / "s.zarr"
+    with _exclusive(store):  # as a run in another process would hold it
+        with pytest.raises(InputError, match=r"s.zarr: another run is using this tile store "
+                                             r"\(pid \d+ on "):
+            run(path, tmp_path / "o.npy", ratio=0.2, store=store, tile_points=3000)
+        assert not store.exists() and not (tmp_path / "o.npy").exists()
+    s = run(path, tmp_path / "o.npy", ratio=0.2, store=store, tile_points=3000)  # released
+    assert s.n_output == round(0.2 * len(X))

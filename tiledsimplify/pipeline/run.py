@@ -9,11 +9,13 @@ Stages are resumable: an existing, complete store for the same input and setting
 finished tiles are not recomputed, and the output is rewritten from the stored results.
 """
 
+import contextlib
 import hashlib
 import json
 import logging
 import math
 import os
+import socket
 import sys
 import tempfile
 import time
@@ -133,6 +135,35 @@ def _whole(value, name):
         if float(value).is_integer():
             return int(value)
     raise InputError(f"{name} must be a whole number, got {value!r}.")
+
+
+@contextlib.contextmanager
+def _exclusive(store_path):
+    """Hold the tile store for this run alone: an exclusive lock on a file beside it
+    (``.NAME.lock``, which names the holder), released when the run ends or its process
+    dies. Two runs on one ``--store`` (an overlapping retry of a scheduled job) would write
+    the same tiles at once; the second is refused instead. Cluster workers write tiles
+    under the run's lock and take none themselves."""
+    try:
+        import fcntl
+    except ImportError:  # not on a POSIX system: no lock
+        yield
+        return
+    lock = store_path.with_name(f".{store_path.name}.lock")
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    with open(lock, "a+") as fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.seek(0)
+            holder = fh.read().strip() or "another process"
+            raise InputError(f"{store_path}: another run is using this tile store ({holder}); "
+                             "wait for it to end, or give another --store.") from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"pid {os.getpid()} on {socket.gethostname()}\n")
+        fh.flush()
+        yield
 
 
 def _connect(address):
@@ -346,7 +377,10 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         store_path = Path(tmp.name) / "store.zarr"
     else:
         store_path = Path(store)
+    held = contextlib.ExitStack()
     try:
+        if tmp is None:
+            held.enter_context(_exclusive(store_path))
         ts = None
         if store_path.exists():
             ts = TileStore.open(store_path)
@@ -439,6 +473,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         n_out, n_boundary = _write_output(ts, source, output, prefix, refined)
         stage("output")
     finally:
+        held.close()
         if tmp is not None:
             tmp.cleanup()
         if own_client is not None:
