@@ -264,7 +264,7 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
                     min_step=0.002, max_rounds=60, k=16):
     """:func:`tiledsimplify.core.refine.refine_coverage` by brute force: per round a fill that
     lowers every distance, and every input point's candidates sorted by (distance, tie)."""
-    from tiledsimplify.core.refine import inputs, lists_from_dense, thin_below
+    from tiledsimplify.core.refine import inputs, thin_below
     X, keep, fixed, addable, ignored, watched, tie = inputs(X, keep, fixed, addable, watch, tie)
     info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
     if not (keep & ~fixed).any() or not (addable & ~keep).any():
@@ -318,3 +318,15 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         H = float(dist[~watched].max())
     info["hausdorff_after"] = H
     return keep, info
+
+
+def lists_from_dense(nd, nbr, none):
+    """CSR lists ``(start, idx, dist)`` for :func:`tiledsimplify.core.refine.thin_below` from
+    cKDTree's ``query(k=…)`` output ``nd`` / ``nbr`` (r, k), where ``none`` (the tree's size)
+    pads the rows with fewer than ``k``."""
+    nbr = np.asarray(nbr, dtype=np.int64).reshape(len(nbr), -1)
+    nd = np.asarray(nd, dtype=np.float64).reshape(len(nbr), -1)
+    valid = nbr != none
+    start = np.zeros(len(nbr) + 1, dtype=np.int64)
+    start[1:] = np.cumsum(valid.sum(axis=1))
+    return start, nbr[valid], nd[valid]

@@ -6,8 +6,7 @@ from scipy.spatial import cKDTree
 
 from tiledsimplify import SimplifyOptions, simplify_points, synthetic
 from tiledsimplify.core.heap import coordinate_hash
-from tiledsimplify.core.refine import (PROTECT, lists_from_dense, protected, refine_coverage,
-                                       thin_below)
+from tiledsimplify.core.refine import PROTECT, protected, refine_coverage, thin_below
 from tiledsimplify.io import read_mesh
 
 import naive
@@ -38,8 +37,8 @@ def test_thin_below_matches_naive(seed):
     nd, nbr = cKDTree(X[cand]).query(X, k=cand.size)  # full lists: no search cut-off
     d1 = nd[:, 0]
     for level in (np.quantile(d1, 0.9) * 1.5, np.max(d1) * 3):
-        gone, dist = thin_below(*lists_from_dense(nd, nbr, cand.size), removable, tie, level,
-                                30)
+        lists = naive.lists_from_dense(nd, nbr, cand.size)
+        gone, dist = thin_below(*lists, removable, tie, level, 30)
         expect = naive.thin_below(X, cand, removable, tie, level, 30)
         assert gone.tolist() == expect.tolist()
         alive = np.ones(cand.size, bool)
@@ -62,7 +61,8 @@ def test_thin_below_on_short_lists_matches_recomputing_every_step(seed):
         nd, nbr = cKDTree(X[cand]).query(X, k=k, distance_upper_bound=radius)
         nbr = np.ascontiguousarray(nbr, dtype=np.int64)
         for level in (np.quantile(d1, 0.9), 2 * d1.max()):
-            gone, dist = thin_below(*lists_from_dense(nd, nbr, 60), removable, tie, level, 40)
+            lists = naive.lists_from_dense(nd, nbr, 60)
+            gone, dist = thin_below(*lists, removable, tie, level, 40)
             expect, expect_dist = naive.thin_lists(nbr, nd, removable, tie, level, 40)
             assert gone.tolist() == expect.tolist()
             np.testing.assert_array_equal(dist, expect_dist)

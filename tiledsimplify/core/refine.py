@@ -101,7 +101,8 @@ def thin_below(start, nbr, nd, removable, tie, level, n_remove):
     """Remove up to ``n_remove`` candidates, smallest gap first, never leaving an input point
     farther than ``level`` from its nearest remaining candidate.
 
-    ``start`` / ``nbr`` / ``nd`` (CSR, :func:`lists_from_dense`): for each input point that
+    ``start`` / ``nbr`` / ``nd`` (CSR: row ``x``'s entries at ``start[x]:start[x + 1]``, as
+    :func:`.cell_grid.nearest` returns them): for each input point that
     may change owner (a *row*), its nearest candidates (ids into the candidate set, nearest
     first; at most ``k``, those within the search radius) and their distances. ``removable``
     (m,) marks the candidates that may go; ``tie`` (uint64, m) breaks equal gaps. A row is
@@ -172,33 +173,6 @@ def thin_below(start, nbr, nd, removable, tie, level, n_remove):
     for x in range(r):
         dist[x] = nd[owner[x]] if owner[x] >= 0 else np.inf
     return out[:done], dist
-
-
-@jit
-def _lists_from_dense(nd, nbr, none):
-    r, k = nbr.shape
-    start = np.zeros(r + 1, dtype=np.int64)
-    for x in range(r):
-        j = 0
-        while j < k and nbr[x, j] != none:
-            j += 1
-        start[x + 1] = start[x] + j
-    idx = np.empty(start[r], dtype=np.int64)
-    dist = np.empty(start[r])
-    for x in range(r):
-        for j in range(start[x + 1] - start[x]):
-            idx[start[x] + j] = nbr[x, j]
-            dist[start[x] + j] = nd[x, j]
-    return start, idx, dist
-
-
-def lists_from_dense(nd, nbr, none):
-    """CSR lists ``(start, idx, dist)`` from cKDTree's ``query(k=…)`` output ``nd`` / ``nbr``
-    (r, k), where ``none`` (the tree's size) pads the rows with fewer than ``k``."""
-    r = len(nbr)
-    nbr = np.ascontiguousarray(np.asarray(nbr).reshape(r, -1), dtype=np.int64)
-    nd = np.ascontiguousarray(np.asarray(nd, dtype=np.float64).reshape(r, -1))
-    return _lists_from_dense(nd, nbr, none)
 
 
 @jit
