@@ -11,7 +11,6 @@ import os
 import sys
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 
@@ -20,7 +19,7 @@ from .core import SimplifyOptions, compile_cache, simplify_points
 from .core.options import MODES
 from .errors import BudgetWarning, InputError, TiledSimplifyError
 from .io import read_points
-from .io.points_out import check_output, write_points
+from .io.points_out import check_output, check_writable, write_json, write_points
 from .io.sources import check_finite
 
 log = logging.getLogger("tiledsimplify")
@@ -198,22 +197,25 @@ def _load_config(path):
     return cfg.get("run", {}), cfg.get("simplify", {})
 
 
+#: the keys of a config file's [run] table and the types they take
+RUN_KEYS = {"ratio": (int, float), "count": (int, float), "scheduler": (str,),
+            "workers": (int, float), "tile_points": (int, float), "halo": (int, float),
+            "floor": (int, float)}
+
+
 def _run(args):
     from .pipeline import run
     run_cfg, simplify_cfg = _load_config(args.config) if args.config else ({}, {})
-    known = {"ratio", "count", "scheduler", "workers", "tile_points", "halo", "floor"}
-    unknown = sorted(set(run_cfg) - known)
+    known = RUN_KEYS
+    unknown = sorted(set(run_cfg) - set(known))
     if unknown:
         raise TiledSimplifyError(f"{args.config}: unknown [run] key(s) {unknown}; known: "
                                  f"{sorted(known)}.")
-    kinds = {"ratio": (int, float), "count": (int, float), "tile_points": (int, float),
-             "workers": (int, float), "halo": (int, float), "floor": (int, float),
-             "scheduler": (str,)}
     for key, value in run_cfg.items():
-        if isinstance(value, bool) or not isinstance(value, kinds[key]):
+        if isinstance(value, bool) or not isinstance(value, known[key]):
             raise TiledSimplifyError(
                 f"{args.config}: [run] {key} must be "
-                f"{'a name' if key == 'scheduler' else 'a number'}, got {value!r}.")
+                f"{'a name' if known[key] == (str,) else 'a number'}, got {value!r}.")
     for key in known:  # command line wins over the config file
         value = getattr(args, key)
         if value is not None:
@@ -230,7 +232,7 @@ def _run(args):
             raise
         raise InputError(f"{args.config}: [simplify] {exc}") from None
     if args.summary:
-        _check_summary_path(Path(args.summary))
+        check_writable(args.summary)
     summary = run(args.input, args.output, ratio=run_cfg.get("ratio"),
                   count=run_cfg.get("count"), options=options,
                   scheduler=run_cfg.get("scheduler", "threads"), workers=run_cfg.get("workers"),
@@ -239,30 +241,10 @@ def _run(args):
                   progress=not (args.no_progress or args.quiet))
     code = EXIT_OK if summary.reached else EXIT_BUDGET
     if args.summary:
-        _write_summary(Path(args.summary), {"input": str(args.input), "version": __version__,
-                                            **summary.to_dict(), "exit_code": code})
+        write_json(args.summary, {"input": str(args.input), "version": __version__,
+                                  **summary.to_dict(), "exit_code": code})
+        log.info("wrote the run summary to %s", args.summary)
     return code
-
-
-def _check_summary_path(path):
-    if not path.parent.is_dir():
-        raise TiledSimplifyError(f"{path}: the summary's directory {path.parent} does not "
-                                 "exist; create it or write the summary somewhere else.")
-    if path.is_dir():
-        raise TiledSimplifyError(f"{path}: is a directory; give a file name for the summary.")
-
-
-def _write_summary(path, summary):
-    """The run's summary as JSON, written to a temporary name and renamed: a reader never
-    sees half a file."""
-    import json
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(json.dumps(summary, indent=2, default=str) + "\n")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    log.info("wrote the run summary to %s", path)
 
 
 def _simplify(args):

@@ -31,10 +31,16 @@ def check_output(path, extra_suffixes=()):
     its directory exists and is writable (the output is written beside it and renamed).
     Raises :class:`FileFormatError` or :class:`InputError` naming the path and the fix.
     """
+    check_writable(path)
+    _check_suffix(Path(path), SUFFIXES + tuple(extra_suffixes))
+
+
+def check_writable(path):
+    """:func:`check_output` without the suffix: ``path`` is not a directory and its
+    directory exists and is writable."""
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{path}: is a directory; give a file name for the output.")
-    _check_suffix(path, SUFFIXES + tuple(extra_suffixes))
     directory = path.parent  # Path("out.ply").parent is Path(".")
     if not directory.is_dir():
         raise InputError(f"{path}: the output directory {directory} does not exist; create it "
@@ -92,6 +98,30 @@ def _write_text(fh, table, sep):
     np.savetxt(fh, np.column_stack(cols), fmt=fmt)
 
 
+def _replace(path, write):
+    """Call ``write(fh)`` on a temporary file beside ``path``, then rename it to ``path``; on
+    any failure remove it, so ``path`` is never half written."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def write_json(path, obj):
+    """``obj`` as indented JSON (values JSON lacks as strings), written as :func:`_replace`
+    writes: a reader never sees half a file."""
+    import json
+    text = json.dumps(obj, indent=2, default=str) + "\n"
+    _replace(Path(path), lambda fh: fh.write(text.encode()))
+
+
 def write_points(path, xyz, columns=None):
     """Write points and per-point columns to ``path``; the format follows the suffix.
 
@@ -107,20 +137,12 @@ def write_points(path, xyz, columns=None):
     path = Path(path)
     suffix = _check_suffix(path, SUFFIXES)
     table = _table(np.asarray(xyz, dtype=np.float64).reshape(-1, 3), columns or {})
-    directory = path.parent
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            if suffix == ".npy":
-                np.save(fh, table)
-            elif suffix == ".ply":
-                _write_ply(fh, table)
-            else:
-                _write_text(fh, table, "," if suffix == ".csv" else " ")
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+
+    def write(fh):
+        if suffix == ".npy":
+            np.save(fh, table)
+        elif suffix == ".ply":
+            _write_ply(fh, table)
+        else:
+            _write_text(fh, table, "," if suffix == ".csv" else " ")
+    _replace(path, write)
