@@ -134,9 +134,11 @@ class SimplifyOptions:
                                              or not isinstance(value, numbers.Real)):
                 raise InputError(f"options.{f.name} must be a number"
                                  f"{' or None' if 'None' in kind else ''}, got {value!r}.")
-            if kind.startswith("bool") and not isinstance(value, (bool, np.bool_)):
-                raise InputError(f"options.{f.name} must be true or false"
-                                 f"{' or None' if 'None' in kind else ''}, got {value!r}.")
+            if kind.startswith("bool"):
+                if not isinstance(value, (bool, np.bool_)):
+                    raise InputError(f"options.{f.name} must be true or false"
+                                     f"{' or None' if 'None' in kind else ''}, got {value!r}.")
+                object.__setattr__(self, f.name, bool(value))
             if kind.startswith("str") and not isinstance(value, str):
                 raise InputError(f"options.{f.name} must be a name (a string), got {value!r}.")
         if self.mode not in MODES:
@@ -145,8 +147,6 @@ class SimplifyOptions:
             object.__setattr__(self, "importance", "paper" if self.mode == "paper" else "coverage")
         if self.refine is None:
             object.__setattr__(self, "refine", self.mode != "paper")
-        if not isinstance(self.refine, bool):
-            raise InputError(f"options.refine must be True, False or None, got {self.refine!r}.")
         if self.importance not in MEASURES:
             raise InputError(
                 f"options.importance must be one of {tuple(MEASURES)}, got {self.importance!r}.")
@@ -165,13 +165,11 @@ class SimplifyOptions:
         if self.spacing is not None and not self.spacing > 0:
             raise InputError("options.spacing must be a positive distance in model units or "
                              f"None, got {self.spacing!r}.")
-        if self.reach is not None and not (isinstance(self.reach, numbers.Real)
-                                           and self.reach > 0):
+        if self.reach is not None and not self.reach > 0:
             raise InputError("options.reach must be a positive number of spacings, inf (the "
                              f"paper's unbounded neighbourhoods) or None, got {self.reach!r}.")
         if self.progressive_until is not None and not (
-                isinstance(self.progressive_until, numbers.Real)
-                and self.progressive_until == self.progressive_until):
+                self.progressive_until == self.progressive_until):  # not NaN
             raise InputError("options.progressive_until must be a number (an importance "
                              f"level) or None, got {self.progressive_until!r}.")
         if not self.boundary_k > 0:

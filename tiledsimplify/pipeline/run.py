@@ -367,19 +367,16 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 "version": __version__}
     fp = _fingerprint(source, settings)
 
-    own_client = None
-    if client is None and isinstance(scheduler, str) and scheduler.startswith("tcp://"):
-        client = own_client = _connect(scheduler)  # one connection for every stage
-    warming = _start_compile(client, scheduler, workers)
-    tmp = None
-    if store is None:
-        tmp = tempfile.TemporaryDirectory(prefix="tiledsimplify-")
-        store_path = Path(tmp.name) / "store.zarr"
-    else:
-        store_path = Path(store)
-    held = contextlib.ExitStack()
+    held = contextlib.ExitStack()  # closed at the end: the lock, the temporary store, a client
     try:
-        if tmp is None:
+        if client is None and isinstance(scheduler, str) and scheduler.startswith("tcp://"):
+            client = held.enter_context(_connect(scheduler))  # one connection for every stage
+        warming = _start_compile(client, scheduler, workers)
+        if store is None:
+            store_path = Path(held.enter_context(
+                tempfile.TemporaryDirectory(prefix="tiledsimplify-"))) / "store.zarr"
+        else:
+            store_path = Path(store)
             held.enter_context(_exclusive(store_path))
         ts = None
         if store_path.exists():
@@ -474,10 +471,6 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         stage("output")
     finally:
         held.close()
-        if tmp is not None:
-            tmp.cleanup()
-        if own_client is not None:
-            own_client.close()
     seconds["total"] = time.perf_counter() - t_start
     cpu_seconds["total"] = sum(cpu_seconds.values())
     reached = n - n_removed == target
@@ -490,7 +483,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          n_tiles=ts.n_tiles, threshold=float(threshold or float("nan")),
                          spacing=float(spacing or float("nan")),
                          n_deeper=n_deeper,
-                         store=str(store_path) if tmp is None else "", output=str(output),
+                         store="" if store is None else str(store_path), output=str(output),
                          reached=reached, message=message, refined=refined, seconds=seconds,
                          cpu_seconds=cpu_seconds)
     log.info("kept %d of %d points (%d boundary) from %d tiles (%d run deeper) in %.1f s "
