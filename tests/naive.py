@@ -330,3 +330,15 @@ def lists_from_dense(nd, nbr, none):
     start = np.zeros(len(nbr) + 1, dtype=np.int64)
     start[1:] = np.cumsum(valid.sum(axis=1))
     return start, nbr[valid], nd[valid]
+
+
+def global_cut_by_sorting(sequences, n_remove):
+    """The global cut by its definition: every step of every tile keyed by (running maximum,
+    tile, step), sorted, and the ``n_remove`` smallest taken; the steps taken per tile."""
+    keys = [(float(r) + 0.0, t, s) for t, seq in sequences.items()
+            for s, r in enumerate(np.maximum.accumulate(np.asarray(seq, dtype=float)))]
+    keys.sort()
+    cut = {t: 0 for t in sequences}
+    for _, t, _ in keys[:max(int(n_remove), 0)]:
+        cut[t] += 1
+    return cut

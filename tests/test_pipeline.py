@@ -36,6 +36,59 @@ def test_global_cut_is_exact_and_prefers_flat_tiles():
     assert sum(global_cut({0: flat}, 1000).values()) == 100
 
 
+@pytest.mark.parametrize("collect", [1 << 22, 3, 0])
+def test_global_cut_matches_sorting_every_step(monkeypatch, collect):
+    """The radix selection against the cut's definition (sort every (running max, tile, step)),
+    on ties, plateaus, -0.0, inf and empty tiles; ``collect`` 0 forces all four passes down to a
+    single key, 3 a mixture of collected and counted ranges."""
+    from naive import global_cut_by_sorting
+
+    from tiledsimplify.pipeline import budget
+    monkeypatch.setattr(budget, "COLLECT", collect)
+    rng = np.random.default_rng(7)
+    kinds = [lambda n: rng.random(n), lambda n: rng.integers(0, 3, n).astype(float),
+             lambda n: np.where(rng.random(n) < 0.3, np.inf, rng.random(n)),
+             lambda n: rng.choice([-0.0, 0.0, 1e-300, -1e-5, 2.0], n),
+             lambda n: np.sort(rng.normal(size=n)) * 1e6]
+    for _ in range(60):
+        seqs = {int(t): kinds[rng.integers(len(kinds))](int(rng.integers(0, 40)))
+                for t in rng.choice(50, rng.integers(1, 7), replace=False)}
+        total = sum(len(q) for q in seqs.values())
+        for n_remove in {0, 1, total // 3, total // 2, total - 1, total, total + 5}:
+            assert global_cut(seqs, n_remove) == global_cut_by_sorting(seqs, n_remove)
+
+
+def test_global_cut_holds_one_tile_at_a_time(monkeypatch):
+    """Memory bounded by a tile, not the input (DESIGN §5): over sequences read lazily, the
+    cut's peak allocation stays within a few tiles' sequences (plus the keys it collects,
+    at most ``COLLECT``: here 1,000), far below all of them."""
+    import tracemalloc
+    from collections.abc import Mapping
+
+    from tiledsimplify.pipeline import budget
+    monkeypatch.setattr(budget, "COLLECT", 1000)
+
+    class Lazy(Mapping):  # like budget.StoreSequences: made when asked for, not kept
+        def __getitem__(self, t):
+            return np.sort(np.random.default_rng(t).random(20_000)) * (t % 7 + 1)
+
+        def __iter__(self):
+            return iter(range(60))
+
+        def __len__(self):
+            return 60
+
+    tile_bytes = 20_000 * 8
+    tracemalloc.start()
+    try:
+        cut = global_cut(Lazy(), 500_000)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert sum(cut.values()) == 500_000
+    assert peak < 12 * tile_bytes + 2 * 8 * (1 << 16)  # 60 tiles' sequences would be 60x
+
+
 def test_deeper_tiles_names_the_tiles_that_stop_short_of_the_cut():
     rng = np.random.default_rng(1)
     full = {t: np.sort(rng.random(50)) * (t + 1) for t in range(4)}

@@ -14,55 +14,145 @@ if its last key is below that bound for every tile that was not run to the end;
 :func:`deeper_tiles` names the tiles for which it is not, and the level they must pass.
 Running those tiles on past that level can only lower the cut (more steps compete for the same
 count), so one deeper pass is enough.
+
+Memory is bounded by a tile, not by the input (DESIGN §5): the level is found by a radix
+selection over the running maxima, read one tile at a time (:func:`_select`), so a store's
+sequences (:class:`StoreSequences`) are never all held at once.
 """
 
+from collections.abc import Mapping
+from typing import NamedTuple
+
 import numpy as np
+
+#: bits of the key resolved per pass of the radix selection (a histogram of 2**DIGIT counts)
+DIGIT = 16
+#: steps in the level's candidate range below which the selection finishes on them in memory
+COLLECT = 1 << 22
+_SIGN = np.uint64(1 << 63)
 
 
 def tile_sequence(step, importance):
     """A tile's importance-at-removal in removal order, from its per-point results."""
     removed = step >= 0
-    order = np.argsort(step[removed], kind="stable")
-    return importance[removed][order]
+    s = step[removed]
+    imp = importance[removed]
+    if s.size and int(s.max()) == s.size - 1:  # the steps 0..k-1 (the tile task writes these)
+        seq = np.empty(s.size, dtype=np.float64)
+        seq[s] = imp
+        return seq
+    return imp[np.argsort(s, kind="stable")]
+
+
+def _keys(seq):
+    """The running maximum of ``seq`` as uint64 keys that sort like the floats (sorted)."""
+    runmax = np.maximum.accumulate(np.asarray(seq, dtype=np.float64)) + 0.0  # -0.0 -> 0.0
+    bits = runmax.view(np.uint64)
+    return np.where(bits & _SIGN, ~bits, bits | _SIGN)
+
+
+def _float(key):
+    key = np.uint64(key)
+    bits = key & ~_SIGN if key & _SIGN else ~key
+    return float(np.array([bits], dtype=np.uint64).view(np.float64)[0])
+
+
+def _select(sequences, tiles, rank, counts=None):
+    """The ``rank``-th smallest (1-based) running maximum over every tile's sequence.
+
+    Returns ``(key, below, equal)``: its key (:func:`_keys`), and per tile the number of steps
+    whose running maximum lies below it and at it. A radix selection: each pass reads the
+    tiles one at a time and counts, by their next :data:`DIGIT` bits, the keys in the range
+    the level is known to lie in; the range narrows to the digit holding the ``rank``-th key.
+    Once it holds at most :data:`COLLECT` keys, a last pass keeps them and selects in memory.
+    Four passes at most (64 bits), two or three on real sequences; memory: one tile's keys, a
+    histogram and at most :data:`COLLECT` keys. ``counts`` (the first pass's histogram over
+    all keys, if the caller has it) saves a pass.
+    """
+    lo, bits = 0, 64  # the level's key lies in [lo, lo + 2**bits)
+    size = None  # keys in that range (unknown before the first pass)
+    while True:
+        if counts is not None:
+            hist, counts = counts, None
+        else:
+            final = bits == 0 or (size is not None and size <= COLLECT)
+            shift = max(bits - DIGIT, 0)
+            hi = lo + (1 << bits)
+            hist = np.zeros(1 << DIGIT, dtype=np.int64)
+            kept, below, equal = {}, {}, {}
+            for t in tiles:
+                key = _keys(sequences[t])
+                a = int(np.searchsorted(key, np.uint64(lo))) if lo else 0
+                b = int(np.searchsorted(key, np.uint64(hi))) if hi < 1 << 64 else key.size
+                below[t] = a
+                if bits == 0:  # a single key: the level
+                    equal[t] = b - a
+                elif final:
+                    kept[t] = key[a:b].copy()  # not a view: it would hold the tile
+                else:
+                    hist += np.bincount(((key[a:b] - np.uint64(lo)) >> np.uint64(shift))
+                                        .astype(np.intp), minlength=1 << DIGIT)
+            if bits == 0:
+                return lo, below, equal
+            if final:
+                every = np.concatenate(list(kept.values()))
+                level = every[np.argpartition(every, rank - 1)[rank - 1]]
+                del every
+                for t, k in kept.items():
+                    i = int(np.searchsorted(k, level, side="left"))
+                    below[t] += i
+                    equal[t] = int(np.searchsorted(k, level, side="right")) - i
+                return int(level), below, equal
+        shift = max(bits - DIGIT, 0)
+        cum = np.cumsum(hist)
+        d = int(np.searchsorted(cum, rank, side="left"))
+        rank -= int(cum[d - 1]) if d else 0
+        size = int(hist[d])
+        lo += d << shift
+        bits = shift
+
+
+class _Cut(NamedTuple):
+    prefix: dict  # tile -> steps taken
+    level: float  # the running maximum of the last step taken (-inf: none taken)
+    last: int  # the tile of the last step taken (-1: none)
+    short: bool  # the known steps number fewer than asked for
+    top: dict  # tile -> the largest known running maximum (-inf: no step known)
 
 
 def _cut(sequences, n_remove):
-    """The cut over the known steps: ``(prefix, level, last_tile, short)``.
-
-    ``prefix`` maps tile -> steps taken; ``(level, last_tile)`` is the key of the last step
-    taken (``(-inf, -1)`` when nothing is removed); ``short`` is True when the known steps
-    number fewer than ``n_remove``.
-    """
+    """The cut over the known steps (:class:`_Cut`), one tile in memory at a time."""
     tiles = sorted(sequences)
-    runmax = {t: np.maximum.accumulate(np.asarray(sequences[t], dtype=np.float64))
-              for t in tiles}
-    prefix = {t: 0 for t in tiles}
-    total = sum(r.size for r in runmax.values())
+    hist = np.zeros(1 << DIGIT, dtype=np.int64)
+    top, size = {}, {}
+    for t in tiles:  # the first pass of the selection, with each tile's size and top
+        key = _keys(sequences[t])
+        size[t] = key.size
+        top[t] = _float(key[-1]) if key.size else -np.inf
+        hist += np.bincount((key >> np.uint64(64 - DIGIT)).astype(np.intp),
+                            minlength=1 << DIGIT)
+    total = sum(size.values())
     take = min(max(int(n_remove), 0), total)
+    prefix = {t: 0 for t in tiles}
     if take == 0:
-        return prefix, -np.inf, -1, n_remove > total
-    levels = np.concatenate([runmax[t] for t in tiles])
-    levels.partition(take - 1)
-    level = float(levels[take - 1])
-    del levels
+        return _Cut(prefix, -np.inf, -1, n_remove > total, top)
+    key, below, equal = _select(sequences, tiles, take, counts=hist)
     rest = take
     for t in tiles:  # every step below the level, then ties at the level by tile, step
-        below = int(np.searchsorted(runmax[t], level, side="left"))
-        prefix[t] = below
-        rest -= below
+        prefix[t] = below[t]
+        rest -= below[t]
     last = -1
     for t in tiles:
         if rest == 0:
             break
-        equal = int(np.searchsorted(runmax[t], level, side="right")) - prefix[t]
-        k = min(equal, rest)
+        k = min(equal[t], rest)
         if k:
             prefix[t] += k
             rest -= k
             last = t
-    if last == -1:  # the last step taken lies below the level: cannot happen, see partition
+    if last == -1 or rest:  # the take-th step lies at the level: cannot happen
         raise AssertionError("global cut: no step at the cut level")
-    return prefix, level, last, n_remove > total
+    return _Cut(prefix, _float(key), last, n_remove > total, top)
 
 
 def global_cut(sequences, n_remove):
@@ -70,8 +160,9 @@ def global_cut(sequences, n_remove):
 
     Parameters
     ----------
-    sequences : dict tile -> float array
-        Each tile's importance at removal, in removal order.
+    sequences : mapping tile -> float array
+        Each tile's importance at removal, in removal order (a :class:`StoreSequences` reads
+        them from a store as they are needed).
     n_remove : int
         Points to remove overall.
 
@@ -82,9 +173,28 @@ def global_cut(sequences, n_remove):
 
     Notes
     -----
-    Memory: one float per known step (a selection, not a sort, finds the level).
+    Memory: one tile's sequence at a time and a 2**16 histogram (:func:`_select`).
     """
-    return _cut(sequences, n_remove)[0]
+    return _cut(sequences, n_remove).prefix
+
+
+def _deeper(cut, sequences, n_remove, exhausted, known):
+    if n_remove <= 0:
+        return {}
+    need = {}
+    for t in sequences:
+        if exhausted[t]:
+            continue
+        if cut.short:
+            need[t] = np.inf
+            continue
+        top = cut.top[t]  # L_t
+        if known is not None:
+            top = max(top, float(known.get(t, -np.inf)))
+        # the unknown steps have keys >= (top, t, len(seq)); the last taken is (level, last, .)
+        if top < cut.level or (top == cut.level and t < cut.last):
+            need[t] = cut.level
+    return need
 
 
 def deeper_tiles(sequences, n_remove, exhausted, known=None):
@@ -92,7 +202,7 @@ def deeper_tiles(sequences, n_remove, exhausted, known=None):
 
     Parameters
     ----------
-    sequences : dict tile -> float array
+    sequences : mapping tile -> float array
         As for :func:`global_cut` (the known prefix of each tile's sequence).
     n_remove : int
     exhausted : dict tile -> bool
@@ -108,35 +218,48 @@ def deeper_tiles(sequences, n_remove, exhausted, known=None):
         For each tile that must be run deeper, the level its running maximum must pass
         (``inf``: to the end). Empty when :func:`global_cut` is already exact.
     """
-    prefix, level, last, short = _cut(sequences, n_remove)
-    if n_remove <= 0:
-        return {}
-    need = {}
-    for t, seq in sequences.items():
-        if exhausted[t]:
-            continue
-        if short:
-            need[t] = np.inf
-            continue
-        top = float(np.max(seq)) if len(seq) else -np.inf  # L_t
-        if known is not None:
-            top = max(top, float(known.get(t, -np.inf)))
-        # the unknown steps have keys >= (top, t, len(seq)); the last taken is (level, last, .)
-        if top < level or (top == level and t < last):
-            need[t] = level
-    return need
+    return _deeper(_cut(sequences, n_remove), sequences, n_remove, exhausted, known)
+
+
+def plan_cut(sequences, n_remove, exhausted, known=None):
+    """:func:`global_cut` and :func:`deeper_tiles` from one selection: ``(prefix, need)``."""
+    cut = _cut(sequences, n_remove)
+    return cut.prefix, _deeper(cut, sequences, n_remove, exhausted, known)
+
+
+class StoreSequences(Mapping):
+    """Every finished tile's known sequence, read from the store when asked for (not kept).
+
+    ``exhausted`` and ``known`` hold, per tile, whether it ran to the end of its sequence and
+    the level its unknown steps reach (see :func:`deeper_tiles`).
+    """
+
+    def __init__(self, store):
+        self.store = store
+        self.exhausted, self.known = {}, {}
+        for i in range(store.n_tiles):
+            attrs = store.result_attrs(i)
+            self.exhausted[i] = bool(attrs.get("exhausted", True))
+            self.known[i] = float(attrs.get("known_level", -np.inf))
+
+    def __getitem__(self, tile):
+        if tile not in self.exhausted:
+            raise KeyError(tile)
+        return tile_sequence(self.store.read_result(tile, "step"),
+                             self.store.read_result(tile, "importance"))
+
+    def __iter__(self):
+        return iter(self.exhausted)
+
+    def __len__(self):
+        return len(self.exhausted)
 
 
 def store_sequences(store):
-    """Every tile's known sequence, whether it is complete, and the level its unknown steps
-    reach (see :func:`deeper_tiles`), from a finished store."""
-    seqs, exhausted, known = {}, {}, {}
-    for i in range(store.n_tiles):
-        seqs[i] = tile_sequence(store.read_result(i, "step"), store.read_result(i, "importance"))
-        attrs = store.result_attrs(i)
-        exhausted[i] = bool(attrs.get("exhausted", True))
-        known[i] = float(attrs.get("known_level", -np.inf))
-    return seqs, exhausted, known
+    """Every tile's known sequence (read lazily, :class:`StoreSequences`), whether it is
+    complete, and the level its unknown steps reach (see :func:`deeper_tiles`)."""
+    seqs = StoreSequences(store)
+    return seqs, seqs.exhausted, seqs.known
 
 
 def store_cut(store, n_remove):

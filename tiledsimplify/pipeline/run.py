@@ -35,7 +35,7 @@ from ..io.las import LAS_SUFFIXES
 from ..io.points_out import check_output, write_points
 from ..io.sources import open_source
 from ..tiles import TileStore
-from .budget import deeper_tiles, global_cut, kept_in_tile, store_sequences
+from .budget import kept_in_tile, plan_cut, store_sequences
 from .tile_refine import cut_hausdorff, is_refined, refine_phases, refine_tile
 from .tile_task import deviation_histogram, simplify_tile, threshold_from_histogram
 
@@ -439,12 +439,11 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
 
         # one global budget; tiles it reaches past their floor run deeper (once suffices)
         n_deeper = 0
-        for _ in range(3):
+        for _ in range(3):  # the sequences are read from the store a tile at a time
             seqs, exhausted, known = store_sequences(ts)
-            need = deeper_tiles(seqs, n - target, exhausted, known)
+            prefix, need = plan_cut(seqs, n - target, exhausted, known)
             if not need:
                 break
-            seqs = None  # not held while the deeper pass runs
             n_deeper += len(need)
             log.info("the global cut reaches past the floor of %d tile(s): running them deeper",
                      len(need))
@@ -457,8 +456,6 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 "global cut still needs deeper tiles after three passes); delete the store and "
                 "run again, and report this as a bug if it persists.")
         stage("deeper")
-        prefix = global_cut(seqs, n - target)
-        del seqs
         n_removed = sum(prefix.values())
         for i in range(ts.n_tiles):  # the saved neighbourhoods are no longer needed
             ts.delete_state(i)
