@@ -1,9 +1,12 @@
 """Writing simplified points: NPY (structured), PLY (binary) and XYZ/CSV text.
 
 Every writer goes to a temporary file beside the target and renames it at the end, so a failed
-run never leaves a half-written output under the requested name.
+run never leaves a half-written output under the requested name. :class:`PointsAt` writes an
+NPY or PLY file record by record at given positions (memory-mapped), so a tiled run writes its
+output in input order one tile at a time.
 """
 
+import contextlib
 import os
 import tempfile
 from pathlib import Path
@@ -50,18 +53,22 @@ def check_writable(path):
                          "a directory you can write to.")
 
 
+def _fields(dtypes):
+    """The records' dtype: x, y, z (little-endian float64), then one field per column."""
+    return np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+                    + [(name, np.dtype(d).newbyteorder("<").str) for name, d in dtypes.items()])
+
+
 def _table(xyz, columns):
     n = len(xyz)
-    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
-    for name, values in columns.items():
-        values = np.asarray(values)
-        if values.shape != (n,):
-            raise ValueError(f"column {name!r} has shape {values.shape}, expected ({n},)")
-        fields.append((name, values.dtype.newbyteorder("<").str))
-    table = np.empty(n, dtype=fields)
+    values = {name: np.asarray(v) for name, v in columns.items()}
+    for name, v in values.items():
+        if v.shape != (n,):
+            raise ValueError(f"column {name!r} has shape {v.shape}, expected ({n},)")
+    table = np.empty(n, dtype=_fields({name: v.dtype for name, v in values.items()}))
     table["x"], table["y"], table["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    for name, values in columns.items():
-        table[name] = values
+    for name, v in values.items():
+        table[name] = v
     return table
 
 
@@ -69,23 +76,29 @@ _PLY_TYPES = {"f8": "double", "f4": "float", "i8": "int64", "i4": "int", "u1": "
               "b1": "uchar", "i2": "short", "u2": "ushort", "u4": "uint", "i1": "char"}
 
 
-def _write_ply(fh, table):
+def _ply_layout(dtype, n):
+    """The PLY header for ``n`` records of ``dtype`` and the dtype of its binary records."""
     props = []
     cast = []
-    for name in table.dtype.names:
-        kind = table.dtype[name].str[1:]
+    for name in dtype.names:
+        kind = dtype[name].str[1:]
         if kind == "i8":  # int64 is not a standard PLY type: store as int32
             cast.append((name, "<i4"))
             props.append(f"property int {name}")
         else:
             cast.append((name, "<" + ("u1" if kind == "b1" else kind)))
             props.append(f"property {_PLY_TYPES[kind]} {name}")
-    out = np.empty(len(table), dtype=cast)
-    for name, _ in cast:
-        out[name] = table[name]
     header = ["ply", "format binary_little_endian 1.0", "comment written by tiledsimplify",
-              f"element vertex {len(table)}", *props, "end_header"]
-    fh.write(("\n".join(header) + "\n").encode("ascii"))
+              f"element vertex {n}", *props, "end_header"]
+    return ("\n".join(header) + "\n").encode("ascii"), np.dtype(cast)
+
+
+def _write_ply(fh, table):
+    header, cast = _ply_layout(table.dtype, len(table))
+    out = np.empty(len(table), dtype=cast)
+    for name in cast.names:
+        out[name] = table[name]
+    fh.write(header)
     fh.write(out.tobytes())
 
 
@@ -98,13 +111,15 @@ def _write_text(fh, table, sep):
     np.savetxt(fh, np.column_stack(cols), fmt=fmt)
 
 
-def _replace(path, write):
-    """Call ``write(fh)`` on a temporary file beside ``path``, then rename it to ``path``; on
-    any failure remove it, so ``path`` is never half written."""
+@contextlib.contextmanager
+def _temporary(path):
+    """A temporary file beside ``path`` (yields its open binary handle and its name), renamed
+    to ``path`` when the block ends; removed instead on any failure, so ``path`` is never half
+    written."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
-            write(fh)
+            yield fh, tmp
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -112,6 +127,13 @@ def _replace(path, write):
         except OSError:
             pass
         raise
+
+
+def _replace(path, write):
+    """Call ``write(fh)`` on a temporary file beside ``path``, then rename it to ``path``
+    (:func:`_temporary`)."""
+    with _temporary(path) as (fh, _):
+        write(fh)
 
 
 def write_json(path, obj):
@@ -146,3 +168,84 @@ def write_points(path, xyz, columns=None):
         else:
             _write_text(fh, table, "," if suffix == ".csv" else " ")
     _replace(path, write)
+
+
+#: suffixes :class:`PointsAt` writes (fixed-size binary records)
+POSITIONAL_SUFFIXES = (".npy", ".ply")
+
+
+class PointsAt:
+    """An NPY or binary PLY file of ``n`` points written record by record at given positions.
+
+    The same bytes as :func:`write_points` on the points in position order, but the records
+    go straight to a memory-mapped temporary file (renamed to ``path`` when the ``with``
+    block ends, removed on failure), so a caller holds only the block it writes::
+
+        with PointsAt("out.ply", n, {"sharp_edge": np.uint8}) as out:
+            out.write(positions, xyz, {"sharp_edge": flags})   # any order, each position once
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.npy`` or ``.ply`` (:data:`POSITIONAL_SUFFIXES`).
+    n : int
+        Number of records.
+    dtypes : dict of name -> dtype
+        The columns after x, y, z, in order.
+    """
+
+    def __init__(self, path, n, dtypes):
+        self.path = Path(path)
+        self.suffix = _check_suffix(self.path, POSITIONAL_SUFFIXES)
+        self.n = int(n)
+        self.dtype = _fields(dtypes)
+        self._stack = None
+        self._records = None
+
+    def __enter__(self):
+        stack = contextlib.ExitStack()
+        fh, tmp = stack.enter_context(_temporary(self.path))
+        try:
+            if self.suffix == ".npy":
+                header = {"descr": np.lib.format.dtype_to_descr(self.dtype),
+                          "fortran_order": False, "shape": (self.n,)}
+                np.lib.format.write_array_header_1_0(fh, header)
+                dtype = self.dtype
+            else:
+                head, dtype = _ply_layout(self.dtype, self.n)
+                fh.write(head)
+            fh.flush()
+            offset = fh.tell()
+            fh.truncate(offset + self.n * dtype.itemsize)
+            if self.n:
+                self._records = np.memmap(tmp, dtype=dtype, mode="r+", offset=offset,
+                                          shape=(self.n,))
+        except BaseException:
+            stack.close()
+            raise
+        self._stack = stack
+        return self
+
+    def write(self, positions, xyz, columns):
+        """Write points ``xyz`` with their ``columns`` at record ``positions``."""
+        xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+        positions = np.asarray(positions, dtype=np.int64)
+        if len(positions) != len(xyz):
+            raise ValueError(f"{len(positions)} positions for {len(xyz)} points")
+        if not len(xyz):
+            return
+        block = np.empty(len(xyz), dtype=self._records.dtype)
+        block["x"], block["y"], block["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+        for name in self.dtype.names[3:]:
+            block[name] = columns[name]
+        self._records[positions] = block
+
+    def __exit__(self, kind, value, tb):
+        try:
+            if self._records is not None and kind is None:
+                self._records.flush()
+            self._records = None  # its map closes with its last reference
+        finally:
+            stack, self._stack = self._stack, None
+            stack.__exit__(kind, value, tb)
+        return False

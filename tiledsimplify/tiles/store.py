@@ -784,6 +784,10 @@ class TileStore:
         t = self._tile(tile)
         return self._array(t, "xyz")[:], self._array(t, "index")[:]
 
+    def core_index(self, tile: int) -> np.ndarray:
+        """A tile's core points' global input indices (:meth:`core` without the points)."""
+        return self._array(self._tile(tile), "index")[:]
+
     def halo_points(self, tile: int, halo: float | None = None, *,
                     owners: bool = False) -> tuple[np.ndarray, ...]:
         """Read the points of other tiles that lie within ``halo`` of this tile's box.

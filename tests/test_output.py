@@ -1,0 +1,44 @@
+"""Outputs written in pieces: records at positions (NPY/PLY) against the whole-array writer,
+and the input-order ranks of a tiled run's kept points against a sort."""
+
+import numpy as np
+import pytest
+
+from tiledsimplify.io.points_out import PointsAt, write_points
+from tiledsimplify.pipeline.input_order import InputRanks
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".ply"])
+@pytest.mark.parametrize("n", [0, 1, 2_000])
+def test_points_at_writes_the_bytes_write_points_writes(tmp_path, suffix, n):
+    rng = np.random.default_rng(n)
+    xyz = rng.normal(size=(n, 3))
+    cols = {"sharp_edge": rng.integers(0, 2, n).astype(np.uint8),
+            "nx": rng.random(n).astype(np.float32), "rank": rng.integers(-1, 9, n)}
+    write_points(tmp_path / ("whole" + suffix), xyz, cols)
+    with PointsAt(tmp_path / ("parts" + suffix), n, {k: v.dtype for k, v in cols.items()}) as out:
+        for part in np.array_split(rng.permutation(n), 5):  # any order, in pieces
+            out.write(part, xyz[part], {k: v[part] for k, v in cols.items()})
+    assert ((tmp_path / ("parts" + suffix)).read_bytes()
+            == (tmp_path / ("whole" + suffix)).read_bytes())
+
+
+def test_points_at_leaves_nothing_on_failure(tmp_path):
+    path = tmp_path / "out.npy"
+    with pytest.raises(RuntimeError), PointsAt(path, 10, {"sharp_edge": np.uint8}) as out:
+        out.write([0, 1], np.zeros((2, 3)), {"sharp_edge": np.zeros(2, np.uint8)})
+        raise RuntimeError("a tile failed")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_input_ranks_are_positions_in_the_sorted_subset():
+    rng = np.random.default_rng(3)
+    for n in (1, 63, 64, 65, 1000, 100_003):
+        subset = np.flatnonzero(rng.random(n) < rng.random())
+        ranks = InputRanks(n)
+        pieces = np.array_split(rng.permutation(subset), 4)  # tiles: any order, disjoint
+        for piece in pieces:
+            ranks.add(piece)
+        assert len(ranks) == len(subset)
+        for piece in pieces:
+            assert np.array_equal(ranks.rank(piece), np.searchsorted(subset, piece))
