@@ -60,14 +60,17 @@ def _state(X, code=0, weight=0.0, reach=np.inf):
     return D, st, flags, imp
 
 
+@pytest.mark.parametrize("update", [True, False])
 @pytest.mark.parametrize("reach", REACHES)
 @pytest.mark.parametrize("measure", MEASURES)
 @pytest.mark.parametrize("kind", ["wavy", "box", "quantised"])
-def test_maintained_state_equals_recomputation(kind, measure, reach):
+def test_maintained_state_equals_recomputation(kind, measure, reach, update):
+    """``update`` False: the normals stay the whole cloud's, everything else is exact."""
     code, weight = measure
     X = _cloud(kind, 1500)
     reach = _reach(X, reach)
     D, st, flags, imp = _state(X, code, weight, reach)
+    normals0 = st.normals.copy()
     frozen = np.zeros(len(X), bool)
     frozen[::17] = True
     removable = ~flags & ~frozen
@@ -75,7 +78,7 @@ def test_maintained_state_equals_recomputation(kind, measure, reach):
     order, at, st.pool = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
         st.normals, st.stable, flags, removable.copy(), imp, heap.coordinate_hash(X), code,
-        weight, 0, 0.0, steps, BOX_FACTOR * D, TOL_FACTOR * D, reach)
+        weight, 0, 0.0, steps, BOX_FACTOR * D, TOL_FACTOR * D, reach, update)
     assert len(order) == steps == len(set(order.tolist()))
     assert not (flags[order] | frozen[order]).any()
     alive = np.ones(len(X), bool)
@@ -84,6 +87,9 @@ def test_maintained_state_equals_recomputation(kind, measure, reach):
     fresh = neighbourhoods(X[keep], D, reach)
     vn_m = adjacency.to_sets(st.start, st.cnt, st.pool)
     vn_f = adjacency.to_sets(fresh.start, fresh.cnt, fresh.pool)
+    if not update:
+        np.testing.assert_array_equal(st.normals, normals0)
+        fresh.normals[:] = normals0[keep]
     imp_f = np.zeros(len(keep))
     importance.all_importance(code, X[keep], fresh.normals, flags[keep], fresh.dn, fresh.dn_cnt,
                               weight, imp_f)
@@ -109,14 +115,17 @@ def test_maintained_state_equals_recomputation(kind, measure, reach):
             assert imp[p] == imp_f[i], p
 
 
-def _naive_greedy(X, flags, frozen, steps, D, code, weight, reach):
-    """Recompute everything from scratch before every removal."""
+def _naive_greedy(X, flags, frozen, steps, D, code, weight, reach, normals=None):
+    """Recompute everything from scratch before every removal (but the ``normals``, if
+    given: the whole cloud's, kept)."""
     tie = heap.coordinate_hash(X)
     alive = np.ones(len(X), bool)
     order, at = [], []
     for _ in range(steps):
         keep = np.flatnonzero(alive)
         st = neighbourhoods(X[keep], D, reach)
+        if normals is not None:
+            st.normals[:] = normals[keep]
         imp = np.zeros(len(keep))
         importance.all_importance(code, X[keep], st.normals, flags[keep], st.dn, st.dn_cnt, weight,
                                   imp)
@@ -131,14 +140,16 @@ def _naive_greedy(X, flags, frozen, steps, D, code, weight, reach):
     return order, at
 
 
+@pytest.mark.parametrize("update", [True, False])
 @pytest.mark.parametrize("reach", REACHES)
 @pytest.mark.parametrize("measure", MEASURES)
 @pytest.mark.parametrize("kind", ["wavy", "box"])
-def test_greedy_order_equals_naive_from_scratch(kind, measure, reach):
+def test_greedy_order_equals_naive_from_scratch(kind, measure, reach, update):
     code, weight = measure
     X = _cloud(kind, 160, seed=1)
     reach = _reach(X, reach)
     D, st, flags, imp = _state(X, code, weight, reach)
+    normals0 = st.normals.copy()
     frozen = np.zeros(len(X), bool)
     frozen[:10] = True
     removable = ~flags & ~frozen
@@ -146,7 +157,8 @@ def test_greedy_order_equals_naive_from_scratch(kind, measure, reach):
     order, at, _ = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
         st.normals, st.stable, flags, removable.copy(), imp, heap.coordinate_hash(X), code,
-        weight, 0, 0.0, steps, BOX_FACTOR * D, TOL_FACTOR * D, reach)
-    ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D, code, weight, reach)
+        weight, 0, 0.0, steps, BOX_FACTOR * D, TOL_FACTOR * D, reach, update)
+    ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D, code, weight, reach,
+                                      None if update else normals0)
     assert order.tolist() == ref_order
     np.testing.assert_array_equal(at, ref_at)

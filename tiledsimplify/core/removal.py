@@ -5,7 +5,8 @@ changes (Fig. 1):
 
 1. the Voronoi neighbourhoods around it (:func:`.voronoi.remove_point`: the former neighbours
    of ``p`` may become neighbours of each other);
-2. the local meshes ``DN_a`` and normals of those former neighbours ``a`` (the first ring) —
+2. the local meshes ``DN_a`` and normals (unless ``update_normals`` is off, the default in mode
+   "coverage") of those former neighbours ``a`` (the first ring) —
    ``DN_a ⊆ VN_a`` depends on nothing else — except boundary points: they are never removed
    and no importance reads their local mesh or normal (Eq. (1) skips boundary neighbours, the
    coverage term reads positions only), so theirs are left as they were (their Voronoi lists
@@ -69,7 +70,7 @@ def _max_count(cnt, items, k):
 @jit
 def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable,
                   boundary, removable, importance, tie, code, weight, guard, guard_value, n_steps,
-                  half, tol, reach, stop_above=math.inf):
+                  half, tol, reach, update_normals=True, stop_above=math.inf):
     """Remove up to ``n_steps`` points, least important first.
 
     Mutates the neighbour lists, local meshes, normals and importance in place (for the
@@ -79,6 +80,8 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     24-33 % of them on scans, the Bunny and Autzen, for 6-8 % off the loop's time.
     ``removable`` marks the candidates (not boundary, not frozen, alive);
     ``half``, ``tol`` and ``reach`` are the Voronoi rule's (:func:`.voronoi.facet_positive`).
+    ``update_normals`` False keeps every normal as it is (``SimplifyOptions.update_normals``):
+    no normal changes, so no second-ring importance is recomputed.
     ``tie`` (uint64) breaks importance ties (see :mod:`.heap`); ``code`` and ``weight`` select the
     importance measure (:func:`.importance.importance_of`). ``guard`` / ``guard_value``
     select a guard rule (:data:`GUARDS`) that can veto a removal; a vetoed point is kept.
@@ -176,6 +179,8 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
                     or nvec[2] != plane_normals[a, 2]):
                 plane_normals[a, 0], plane_normals[a, 1], plane_normals[a, 2] = (
                     nvec[0], nvec[1], nvec[2])
+                if not update_normals:
+                    continue
                 normal_at(X, a, dn[a], c, plane_normals[a], wvec, nvec)
                 if (wvec[0] != normals[a, 0] or wvec[1] != normals[a, 1]
                         or wvec[2] != normals[a, 2]):

@@ -380,7 +380,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
             Xu, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
             st.normals, st.stable, boundary_u, alive, imp_u, tie, code, weight,
             GUARDS[options.guard], float(options.max_spacing or 0.0), n_steps, BOX_FACTOR * D,
-            TOL_FACTOR * D, st.reach, stop_above)
+            TOL_FACTOR * D, st.reach, options.update_normals, stop_above)
         return order_k, at_k
 
     if not options.progressive:
