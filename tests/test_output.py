@@ -42,3 +42,20 @@ def test_input_ranks_are_positions_in_the_sorted_subset():
         assert len(ranks) == len(subset)
         for piece in pieces:
             assert np.array_equal(ranks.rank(piece), np.searchsorted(subset, piece))
+
+
+def test_points_at_full_disk_is_an_error_naming_the_output(tmp_path, monkeypatch):
+    """The records' space is reserved up front: a full disk fails there, clearly, not as a
+    SIGBUS on a memory-mapped write; nothing is left behind."""
+    import errno
+    import os
+
+    from tiledsimplify.errors import InputError
+
+    def full(fd, offset, size):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(os, "posix_fallocate", full, raising=False)
+    with pytest.raises(InputError, match=r"out\.ply: cannot reserve .*No space left"):
+        with PointsAt(tmp_path / "out.ply", 1000, {}) as out:
+            out.write([0], np.zeros((1, 3)), {})
+    assert list(tmp_path.iterdir()) == []

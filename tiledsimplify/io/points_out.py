@@ -7,6 +7,7 @@ output in input order one tile at a time.
 """
 
 import contextlib
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -170,6 +171,20 @@ def write_points(path, xyz, columns=None):
     _replace(path, write)
 
 
+def _reserve(fh, offset, size, path):
+    """Extend the file to ``offset + size`` bytes with its disk space allocated now: a full
+    disk is then an error here, naming the output, not a SIGBUS on a mapped write later."""
+    fh.truncate(offset + size)
+    if size and hasattr(os, "posix_fallocate"):
+        try:
+            os.posix_fallocate(fh.fileno(), offset, size)
+        except OSError as e:
+            if e.errno in (errno.EOPNOTSUPP, errno.EINVAL):  # the file system cannot: as is
+                return
+            raise InputError(f"{path}: cannot reserve {size / 2**20:.0f} MB for the output "
+                             f"({e.strerror}); free disk space or write elsewhere.") from e
+
+
 #: suffixes :class:`PointsAt` writes (fixed-size binary records)
 POSITIONAL_SUFFIXES = (".npy", ".ply")
 
@@ -216,12 +231,12 @@ class PointsAt:
                 fh.write(head)
             fh.flush()
             offset = fh.tell()
-            fh.truncate(offset + self.n * dtype.itemsize)
+            _reserve(fh, offset, self.n * dtype.itemsize, self.path)
             if self.n:
                 self._records = np.memmap(tmp, dtype=dtype, mode="r+", offset=offset,
                                           shape=(self.n,))
-        except BaseException:
-            stack.close()
+        except BaseException as e:  # the temporary file goes, not renamed: pass the error on
+            stack.__exit__(type(e), e, e.__traceback__)
             raise
         self._stack = stack
         return self
