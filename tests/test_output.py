@@ -55,7 +55,7 @@ def test_points_at_full_disk_is_an_error_naming_the_output(tmp_path, monkeypatch
     def full(fd, offset, size):
         raise OSError(errno.ENOSPC, "No space left on device")
     monkeypatch.setattr(os, "posix_fallocate", full, raising=False)
-    with pytest.raises(InputError, match=r"out\.ply: cannot reserve .*No space left"):
-        with PointsAt(tmp_path / "out.ply", 1000, {}) as out:
-            out.write([0], np.zeros((1, 3)), {})
+    with (pytest.raises(InputError, match=r"out\.ply: cannot reserve .*No space left"),
+          PointsAt(tmp_path / "out.ply", 1000, {}) as out):
+        out.write([0], np.zeros((1, 3)), {})
     assert list(tmp_path.iterdir()) == []
