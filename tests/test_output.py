@@ -8,9 +8,11 @@ from tiledsimplify.io.points_out import PointsAt, write_points
 from tiledsimplify.pipeline.input_order import InputRanks
 
 
-@pytest.mark.parametrize("suffix", [".npy", ".ply"])
+@pytest.mark.parametrize("suffix", [".npy", ".ply", ".xyz", ".csv"])
 @pytest.mark.parametrize("n", [0, 1, 2_000])
-def test_points_at_writes_the_bytes_write_points_writes(tmp_path, suffix, n):
+def test_points_at_writes_the_bytes_write_points_writes(tmp_path, monkeypatch, suffix, n):
+    from tiledsimplify.io import points_out
+    monkeypatch.setattr(points_out, "TEXT_CHUNK", 300)  # text lines formatted in 7 chunks
     rng = np.random.default_rng(n)
     xyz = rng.normal(size=(n, 3))
     cols = {"sharp_edge": rng.integers(0, 2, n).astype(np.uint8),
@@ -23,8 +25,9 @@ def test_points_at_writes_the_bytes_write_points_writes(tmp_path, suffix, n):
             == (tmp_path / ("whole" + suffix)).read_bytes())
 
 
-def test_points_at_leaves_nothing_on_failure(tmp_path):
-    path = tmp_path / "out.npy"
+@pytest.mark.parametrize("suffix", [".npy", ".csv"])
+def test_points_at_leaves_nothing_on_failure(tmp_path, suffix):
+    path = tmp_path / ("out" + suffix)
     with pytest.raises(RuntimeError), PointsAt(path, 10, {"sharp_edge": np.uint8}) as out:
         out.write([0, 1], np.zeros((2, 3)), {"sharp_edge": np.zeros(2, np.uint8)})
         raise RuntimeError("a tile failed")

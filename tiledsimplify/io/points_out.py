@@ -1,9 +1,9 @@
 """Writing simplified points: NPY (structured), PLY (binary) and XYZ/CSV text.
 
 Every writer goes to a temporary file beside the target and renames it at the end, so a failed
-run never leaves a half-written output under the requested name. :class:`PointsAt` writes an
-NPY or PLY file record by record at given positions (memory-mapped), so a tiled run writes its
-output in input order one tile at a time.
+run never leaves a half-written output under the requested name. :class:`PointsAt` writes
+record by record at given positions (memory-mapped), so a tiled run writes its output in input
+order one tile at a time.
 """
 
 import contextlib
@@ -103,9 +103,10 @@ def _write_ply(fh, table):
     fh.write(out.tobytes())
 
 
-def _write_text(fh, table, sep):
+def _write_text(fh, table, sep, header=True):
     names = table.dtype.names
-    fh.write((sep.join(names) + "\n").encode())
+    if header:
+        fh.write((sep.join(names) + "\n").encode())
     cols = [table[n].astype(np.int64) if table.dtype[n].kind in "bi" else table[n]
             for n in names]
     fmt = sep.join("%d" if c.dtype.kind == "i" else "%.17g" for c in cols)
@@ -185,16 +186,19 @@ def _reserve(fh, offset, size, path):
                              f"({e.strerror}); free disk space or write elsewhere.") from e
 
 
-#: suffixes :class:`PointsAt` writes (fixed-size binary records)
-POSITIONAL_SUFFIXES = (".npy", ".ply")
+#: records formatted per chunk when :class:`PointsAt` writes text at the end
+TEXT_CHUNK = 1 << 20
 
 
 class PointsAt:
-    """An NPY or binary PLY file of ``n`` points written record by record at given positions.
+    """A points file of ``n`` records written record by record at given positions.
 
-    The same bytes as :func:`write_points` on the points in position order, but the records
-    go straight to a memory-mapped temporary file (renamed to ``path`` when the ``with``
-    block ends, removed on failure), so a caller holds only the block it writes::
+    The same bytes as :func:`write_points` on the points in position order, but a caller
+    holds only the block it writes: NPY and binary PLY records go straight to a
+    memory-mapped temporary file (renamed to ``path`` when the ``with`` block ends, removed
+    on failure); for XYZ/CSV text, whose lines vary in length, the records go to a temporary
+    file of fixed-size records first and are formatted, :data:`TEXT_CHUNK` at a time, at the
+    end::
 
         with PointsAt("out.ply", n, {"sharp_edge": np.uint8}) as out:
             out.write(positions, xyz, {"sharp_edge": flags})   # any order, each position once
@@ -202,7 +206,7 @@ class PointsAt:
     Parameters
     ----------
     path : str or Path
-        ``.npy`` or ``.ply`` (:data:`POSITIONAL_SUFFIXES`).
+        Any suffix :func:`write_points` writes (:data:`SUFFIXES`).
     n : int
         Number of records.
     dtypes : dict of name -> dtype
@@ -211,7 +215,7 @@ class PointsAt:
 
     def __init__(self, path, n, dtypes):
         self.path = Path(path)
-        self.suffix = _check_suffix(self.path, POSITIONAL_SUFFIXES)
+        self.suffix = _check_suffix(self.path, SUFFIXES)
         self.n = int(n)
         self.dtype = _fields(dtypes)
         self._stack = None
@@ -219,16 +223,23 @@ class PointsAt:
 
     def __enter__(self):
         stack = contextlib.ExitStack()
-        fh, tmp = stack.enter_context(_temporary(self.path))
         try:
-            if self.suffix == ".npy":
-                header = {"descr": np.lib.format.dtype_to_descr(self.dtype),
-                          "fortran_order": False, "shape": (self.n,)}
-                np.lib.format.write_array_header_1_0(fh, header)
+            if self.suffix in (".npy", ".ply"):
+                fh, tmp = stack.enter_context(_temporary(self.path))
+                if self.suffix == ".npy":
+                    header = {"descr": np.lib.format.dtype_to_descr(self.dtype),
+                              "fortran_order": False, "shape": (self.n,)}
+                    np.lib.format.write_array_header_1_0(fh, header)
+                    dtype = self.dtype
+                else:
+                    head, dtype = _ply_layout(self.dtype, self.n)
+                    fh.write(head)
+            else:  # text: fixed-size records now, lines at the end
+                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".records",
+                                           dir=self.path.parent)
+                stack.callback(os.unlink, tmp)
+                fh = stack.enter_context(os.fdopen(fd, "wb"))
                 dtype = self.dtype
-            else:
-                head, dtype = _ply_layout(self.dtype, self.n)
-                fh.write(head)
             fh.flush()
             offset = fh.tell()
             _reserve(fh, offset, self.n * dtype.itemsize, self.path)
@@ -255,12 +266,26 @@ class PointsAt:
             block[name] = columns[name]
         self._records[positions] = block
 
+    def _format_text(self):
+        records = self._records if self._records is not None else np.empty(0, self.dtype)
+        sep = "," if self.suffix == ".csv" else " "
+        with _temporary(self.path) as (fh, _):
+            fh.write((sep.join(self.dtype.names) + "\n").encode())
+            for start in range(0, self.n, TEXT_CHUNK):
+                _write_text(fh, np.asarray(records[start:start + TEXT_CHUNK]), sep, header=False)
+
     def __exit__(self, kind, value, tb):
         try:
             if self._records is not None and kind is None:
                 self._records.flush()
+            if kind is None and self.suffix not in (".npy", ".ply"):
+                self._format_text()
             self._records = None  # its map closes with its last reference
-        finally:
+        except BaseException as e:
+            self._records = None
             stack, self._stack = self._stack, None
-            stack.__exit__(kind, value, tb)
+            stack.__exit__(type(e), e, e.__traceback__)
+            raise
+        stack, self._stack = self._stack, None
+        stack.__exit__(kind, value, tb)
         return False

@@ -32,7 +32,7 @@ from ..core import SimplifyOptions, compile_cache, edge_fit
 from ..core.result import resolve_target
 from ..errors import InputError, TiledSimplifyError
 from ..io.las import LAS_SUFFIXES
-from ..io.points_out import POSITIONAL_SUFFIXES, PointsAt, check_output, write_points
+from ..io.points_out import PointsAt, check_output
 from ..io.sources import open_source
 from ..tiles import TileStore
 from .budget import kept_in_tile, plan_cut, store_sequences
@@ -545,9 +545,9 @@ def _kept(ts, tile, prefix, refined):
 
 def _write_output(ts, source, output, prefix, refined=False):
     """Write the kept core points of every tile: the refined flags if ``refined``, else the
-    cut's. LAS/LAZ tile by tile, NPY/PLY in input order at each point's rank
-    (:class:`.input_order.InputRanks`), both in memory bounded by a tile; text outputs
-    gathered."""
+    cut's. LAS/LAZ tile by tile, the other formats in input order at each point's rank
+    (:class:`.input_order.InputRanks`, :class:`~tiledsimplify.io.points_out.PointsAt`), in
+    memory bounded by a tile."""
     n_out = n_boundary = 0
     if output.suffix.lower() in LAS_SUFFIXES:
         from ..io.las import LasOutput
@@ -566,37 +566,21 @@ def _write_output(ts, source, output, prefix, refined=False):
                 n_out += k
                 n_boundary += int(boundary[keep].sum())
         return n_out, n_boundary
-    if output.suffix.lower() in POSITIONAL_SUFFIXES:  # input order, a tile at a time
-        ranks = InputRanks(ts.n_total)
-        for i in range(ts.n_tiles):
-            ranks.add(ts.core_index(i)[_keep(ts, i, prefix, refined)])
-        n_out = len(ranks)
-        f = ts.read_result(0, "normal").dtype if ts.n_tiles else np.float32  # as stored
-        with PointsAt(output, n_out, {"sharp_edge": np.uint8, "nx": f, "ny": f, "nz": f}) as out:
-            for i in range(ts.n_tiles):
-                keep, boundary = _kept(ts, i, prefix, refined)
-                xyz, idx = ts.core(i)
-                nrm = ts.read_result(i, "normal")[keep]
-                out.write(ranks.rank(idx[keep]), xyz[keep], {
-                    "sharp_edge": boundary[keep].astype(np.uint8),
-                    "nx": nrm[:, 0], "ny": nrm[:, 1], "nz": nrm[:, 2]})
-                n_boundary += int(boundary[keep].sum())
-        return n_out, n_boundary
-    # text: gathered and sorted into input order (records of varying length)
-    parts, flags, normals, index = [], [], [], []
+    # in input order, a tile at a time
+    ranks = InputRanks(ts.n_total)
     for i in range(ts.n_tiles):
-        keep, boundary = _kept(ts, i, prefix, refined)
-        xyz, idx = ts.core(i)
-        parts.append(xyz[keep])
-        flags.append(boundary[keep])
-        normals.append(ts.read_result(i, "normal")[keep])
-        index.append(idx[keep])
-    xyz = np.concatenate(parts) if parts else np.empty((0, 3))
-    order = np.argsort(np.concatenate(index), kind="stable")  # input order
-    b = np.concatenate(flags)[order]
-    nrm = np.concatenate(normals)[order]
-    write_points(output, xyz[order], {
-        "sharp_edge": b.astype(np.uint8), "nx": nrm[:, 0], "ny": nrm[:, 1], "nz": nrm[:, 2]})
-    return len(xyz), int(b.sum())
+        ranks.add(ts.core_index(i)[_keep(ts, i, prefix, refined)])
+    n_out = len(ranks)
+    f = ts.read_result(0, "normal").dtype if ts.n_tiles else np.float32  # as stored
+    with PointsAt(output, n_out, {"sharp_edge": np.uint8, "nx": f, "ny": f, "nz": f}) as out:
+        for i in range(ts.n_tiles):
+            keep, boundary = _kept(ts, i, prefix, refined)
+            xyz, idx = ts.core(i)
+            nrm = ts.read_result(i, "normal")[keep]
+            out.write(ranks.rank(idx[keep]), xyz[keep], {
+                "sharp_edge": boundary[keep].astype(np.uint8),
+                "nx": nrm[:, 0], "ny": nrm[:, 1], "nz": nrm[:, 2]})
+            n_boundary += int(boundary[keep].sum())
+    return n_out, n_boundary
 
 
