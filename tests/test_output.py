@@ -62,3 +62,33 @@ def test_points_at_full_disk_is_an_error_naming_the_output(tmp_path, monkeypatch
           PointsAt(tmp_path / "out.ply", 1000, {}) as out):
         out.write([0], np.zeros((1, 3)), {})
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".xyz", ".laz"])
+def test_outputs_get_the_permissions_of_a_new_file(tmp_path, suffix):
+    """Not mkstemp's owner-only 0600: 0666 less the umask, as any new file."""
+    import os
+    import stat
+
+    from tiledsimplify.io.las import LAS_SUFFIXES
+    mask = os.umask(0o022)
+    try:
+        path = tmp_path / ("out" + suffix)
+        xyz = np.random.default_rng(0).random((50, 3))
+        if suffix in LAS_SUFFIXES:
+            import laspy
+
+            from tiledsimplify.io.las import write_las
+            header = laspy.LasHeader(point_format=0, version="1.2")
+            header.scales, header.offsets = [1e-6] * 3, [0.0] * 3
+            dims = [d for d in header.point_format.dimension_names if d not in ("X", "Y", "Z")]
+            write_las(path, header, xyz, {d: np.zeros(len(xyz), np.uint8) for d in dims},
+                      extra_dims={})
+        else:
+            write_points(path, xyz)
+        assert stat.S_IMODE(path.stat().st_mode) == 0o644
+        with PointsAt(tmp_path / ("at" + suffix if suffix != ".laz" else "at.ply"), 1, {}) as out:
+            out.write([0], xyz[:1], {})
+        assert stat.S_IMODE(next(tmp_path.glob("at.*")).stat().st_mode) == 0o644
+    finally:
+        os.umask(mask)

@@ -77,6 +77,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import FileFormatError, InputError
+from .points_out import publish
 
 __all__ = [
     "LAS_SUFFIXES",
@@ -899,7 +900,7 @@ class LasOutput:
             if self._evlrs:
                 self._writer.write_evlrs(self._evlrs)
             self._writer.close()
-            os.replace(self._tmp, self.path)
+            publish(self._tmp, self.path)
         except BaseException:
             self._discard_writer()
             self._unlink_tmp()

@@ -113,6 +113,16 @@ def _write_text(fh, table, sep, header=True):
     np.savetxt(fh, np.column_stack(cols), fmt=fmt)
 
 
+def publish(tmp, path):
+    """Rename the finished temporary file ``tmp`` to ``path``, with the permissions a new file
+    gets (``0o666`` less the umask): ``mkstemp`` makes it readable by its owner alone, and an
+    output a pipeline writes for others must not stay so."""
+    mask = os.umask(0)
+    os.umask(mask)
+    os.chmod(tmp, 0o666 & ~mask)
+    os.replace(tmp, path)
+
+
 @contextlib.contextmanager
 def _temporary(path):
     """A temporary file beside ``path`` (yields its open binary handle and its name), renamed
@@ -122,7 +132,7 @@ def _temporary(path):
     try:
         with os.fdopen(fd, "wb") as fh:
             yield fh, tmp
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)
