@@ -92,3 +92,40 @@ def test_outputs_get_the_permissions_of_a_new_file(tmp_path, suffix):
         assert stat.S_IMODE(next(tmp_path.glob("at.*")).stat().st_mode) == 0o644
     finally:
         os.umask(mask)
+
+
+def test_a_full_disk_names_the_output(tmp_path, monkeypatch, caplog):
+    """numpy reports a short write as "N requested and M written" (no file, no errno) and
+    lazrs as "IoError: Failed to call write": both become errors naming the output and the
+    fix; the command line exits 1 (not an input problem), nothing is left behind."""
+    import laspy
+
+    from tiledsimplify.cli import EXIT_ERROR, main
+    from tiledsimplify.errors import FileFormatError
+    from tiledsimplify.io.las import write_las
+
+    def short(*args, **kwargs):
+        raise OSError("17974 requested and 248 written")
+    monkeypatch.setattr(np, "save", short)
+    with pytest.raises(OSError, match=r"writing the output failed \(17974 requested.*free "
+                                      r"space") as info:
+        write_points(tmp_path / "out.npy", np.zeros((5, 3)))
+    assert info.value.filename == str(tmp_path / "out.npy")
+    pts = tmp_path / "in.xyz"
+    pts.write_text("\n".join(f"{i} {i * i % 7} {i % 3}" for i in range(200)) + "\n")
+    assert main(["simplify", str(pts), str(tmp_path / "o.npy"), "--ratio", "0.5", "-q"]) \
+        == EXIT_ERROR
+    assert "o.npy: writing the output failed" in caplog.text
+    monkeypatch.undo()
+
+    def lazrs_fails(self):
+        raise RuntimeError("IoError: Failed to call write")
+    monkeypatch.setattr(laspy.LasWriter, "close", lazrs_fails)
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.scales, header.offsets = [1e-6] * 3, [0.0] * 3
+    dims = [d for d in header.point_format.dimension_names if d not in ("X", "Y", "Z")]
+    with pytest.raises(FileFormatError, match=r"out\.laz: writing the output failed .*Failed "
+                                              r"to call write.*free space"):
+        write_las(tmp_path / "out.laz", header, np.zeros((5, 3)),
+                  {d: np.zeros(5, np.uint8) for d in dims}, extra_dims={})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.xyz"]

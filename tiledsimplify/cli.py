@@ -6,6 +6,7 @@ Exit codes: 0 done; 2 bad usage or bad input (the message names the file and the
 """
 
 import argparse
+import errno
 import logging
 import os
 import sys
@@ -297,6 +298,12 @@ def main(argv=None):
     except (TiledSimplifyError, ValueError, ImportError) as exc:
         log.error("%s", exc)
         return EXIT_INPUT
+    except OSError as exc:  # the machine, not the input: a full disk, a lost mount
+        where = f"{exc.filename}: " if exc.filename else ""
+        hint = (" Free disk space or write elsewhere." if exc.errno == errno.ENOSPC
+                else "")
+        log.error("%s%s.%s", where, exc.strerror or exc, hint)
+        return EXIT_ERROR
 
 
 if __name__ == "__main__":

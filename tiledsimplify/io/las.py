@@ -815,11 +815,17 @@ class LasOutput:
         try:
             self._writer.write_points(rec)
         except Exception as exc:
-            if isinstance(exc, OSError):
-                raise
-            raise FileFormatError(f"{self.path}: writing points failed "
-                                  f"({type(exc).__name__}: {exc})") from exc
+            raise self._write_error(exc) from exc
         self.count += m
+
+    def _write_error(self, exc):
+        """The error to raise when the writer fails: the output named, and where to look
+        (lazrs reports a full disk as ``IoError: Failed to call write``, not an OSError)."""
+        if isinstance(exc, OSError) and exc.errno != errno.ENOSPC:
+            return exc
+        return FileFormatError(f"{self.path}: writing the output failed ({type(exc).__name__}: "
+                               f"{exc}); check that {self.path.parent} has free space, or "
+                               "write elsewhere.")
 
     def _set(self, rec, name, values, m):
         values = np.asarray(values)
@@ -899,7 +905,10 @@ class LasOutput:
             self._set_extra_bytes_ranges()
             if self._evlrs:
                 self._writer.write_evlrs(self._evlrs)
-            self._writer.close()
+            try:
+                self._writer.close()
+            except Exception as exc:
+                raise self._write_error(exc) from exc
             publish(self._tmp, self.path)
         except BaseException:
             self._discard_writer()

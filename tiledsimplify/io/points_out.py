@@ -130,8 +130,13 @@ def _temporary(path):
     written."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            yield fh, tmp
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                yield fh, tmp
+        except OSError as e:  # numpy's short write says "N requested and M written", no file
+            raise OSError(e.errno if e.errno is not None else errno.EIO,
+                          f"writing the output failed ({e}); check that {path.parent} has free "
+                          "space, or write elsewhere", str(path)) from e
         publish(tmp, path)
     except BaseException:
         try:
