@@ -129,3 +129,21 @@ def test_a_full_disk_names_the_output(tmp_path, monkeypatch, caplog):
         write_las(tmp_path / "out.laz", header, np.zeros((5, 3)),
                   {d: np.zeros(5, np.uint8) for d in dims}, extra_dims={})
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.xyz"]
+
+
+def test_run_checks_the_space_for_its_output_before_the_work(tmp_path, monkeypatch):
+    """An NPY output of `target` records cannot fit in less: refused before the ingest (no
+    store, no output), not after hours of work."""
+    import shutil
+    from collections import namedtuple
+
+    from tiledsimplify.errors import InputError
+    from tiledsimplify.pipeline import run
+    X = np.random.default_rng(0).random((2000, 3))
+    np.save(tmp_path / "in.npy", X)
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**6, 10**6 - 4096, 4096))
+    with pytest.raises(InputError, match=r"out\.npy: the output needs at least 36 KB but .* has "
+                                         r"4 KB free"):
+        run(tmp_path / "in.npy", tmp_path / "out.npy", ratio=0.5, store=tmp_path / "store")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.npy"]

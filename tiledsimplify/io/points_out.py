@@ -9,6 +9,7 @@ order one tile at a time.
 import contextlib
 import errno
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -17,6 +18,26 @@ import numpy as np
 from ..errors import FileFormatError, InputError
 
 SUFFIXES = (".npy", ".ply", ".xyz", ".txt", ".csv")
+
+
+def check_space(path, need):
+    """Fail now, not after the work, if the directory of ``path`` has less than ``need``
+    bytes free (a lower bound of the output's size)."""
+    path = Path(path)
+    free = shutil.disk_usage(path.parent).free
+    if free < need:
+        raise InputError(f"{path}: the output needs at least {_size(need)} but {path.parent} "
+                         f"has {_size(free)} free; free disk space or write elsewhere.")
+
+
+def _size(n):
+    return f"{n / 2**20:,.1f} MB" if n >= 2**20 else f"{n / 2**10:,.0f} KB"
+
+
+def record_bytes(dtypes):
+    """Bytes of one output record with these columns after x, y, z (NPY and PLY: exactly;
+    text: its fixed-size records, written before the lines)."""
+    return _fields(dtypes).itemsize
 
 
 def _check_suffix(path, known):

@@ -32,7 +32,7 @@ from ..core import SimplifyOptions, compile_cache, edge_fit
 from ..core.result import resolve_target
 from ..errors import InputError, TiledSimplifyError
 from ..io.las import LAS_SUFFIXES
-from ..io.points_out import PointsAt, check_output
+from ..io.points_out import PointsAt, check_output, check_space, record_bytes
 from ..io.sources import open_source
 from ..tiles import TileStore
 from .budget import kept_in_tile, plan_cut, store_sequences
@@ -360,6 +360,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"{output}: LAS/LAZ output needs LAS/LAZ input (it keeps the input's "
                          "point records); write .ply, .npy, .xyz or .csv instead.")
     check_output(output, LAS_SUFFIXES)
+    check_space(output, target * _record_bytes(output, source))
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
     if tile_points is None:
         tile_points = default_tile_points(n)
@@ -535,6 +536,21 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
     return True
 
 
+#: the columns of a non-LAS output after x, y, z (normals as the tile store keeps them)
+OUTPUT_COLUMNS = {"sharp_edge": np.uint8, "nx": np.float32, "ny": np.float32, "nz": np.float32}
+
+
+def _record_bytes(output, source):
+    """A lower bound of the output's bytes per kept point: its record (LAS: the input's
+    point record, before compression — none is assumed for LAZ)."""
+    suffix = output.suffix.lower()
+    if suffix == ".laz":
+        return 0
+    if suffix in LAS_SUFFIXES:
+        return source.template_header().point_format.size
+    return record_bytes(OUTPUT_COLUMNS)
+
+
 def _keep(ts, tile, prefix, refined):
     return ts.read_refined(tile)[0] if refined else kept_in_tile(ts, tile, prefix)
 
@@ -572,7 +588,8 @@ def _write_output(ts, source, output, prefix, refined=False):
         ranks.add(ts.core_index(i)[_keep(ts, i, prefix, refined)])
     n_out = len(ranks)
     f = ts.read_result(0, "normal").dtype if ts.n_tiles else np.float32  # as stored
-    with PointsAt(output, n_out, {"sharp_edge": np.uint8, "nx": f, "ny": f, "nz": f}) as out:
+    columns = {**OUTPUT_COLUMNS, "nx": f, "ny": f, "nz": f}
+    with PointsAt(output, n_out, columns) as out:
         for i in range(ts.n_tiles):
             keep, boundary = _kept(ts, i, prefix, refined)
             xyz, idx = ts.core(i)
