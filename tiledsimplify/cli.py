@@ -6,7 +6,6 @@ Exit codes: 0 done; 2 bad usage or bad input (the message names the file and the
 """
 
 import argparse
-import errno
 import logging
 import os
 import sys
@@ -207,17 +206,16 @@ RUN_KEYS = {"ratio": (int, float), "count": (int, float), "scheduler": (str,),
 def _run(args):
     from .pipeline import run
     run_cfg, simplify_cfg = _load_config(args.config) if args.config else ({}, {})
-    known = RUN_KEYS
-    unknown = sorted(set(run_cfg) - set(known))
+    unknown = sorted(set(run_cfg) - set(RUN_KEYS))
     if unknown:
         raise TiledSimplifyError(f"{args.config}: unknown [run] key(s) {unknown}; known: "
-                                 f"{sorted(known)}.")
+                                 f"{sorted(RUN_KEYS)}.")
     for key, value in run_cfg.items():
-        if isinstance(value, bool) or not isinstance(value, known[key]):
+        if isinstance(value, bool) or not isinstance(value, RUN_KEYS[key]):
             raise TiledSimplifyError(
                 f"{args.config}: [run] {key} must be "
-                f"{'a name' if known[key] == (str,) else 'a number'}, got {value!r}.")
-    for key in known:  # command line wins over the config file
+                f"{'a name' if RUN_KEYS[key] == (str,) else 'a number'}, got {value!r}.")
+    for key in RUN_KEYS:  # command line wins over the config file
         value = getattr(args, key)
         if value is not None:
             run_cfg[key] = value
@@ -298,11 +296,10 @@ def main(argv=None):
     except (TiledSimplifyError, ValueError, ImportError) as exc:
         log.error("%s", exc)
         return EXIT_INPUT
-    except OSError as exc:  # the machine, not the input: a full disk, a lost mount
+    except OSError as exc:  # the machine, not the input: a full disk, a lost mount (the
+        # output writers' errors say what to do; "No space left on device" says it itself)
         where = f"{exc.filename}: " if exc.filename else ""
-        hint = (" Free disk space or write elsewhere." if exc.errno == errno.ENOSPC
-                else "")
-        log.error("%s%s.%s", where, exc.strerror or exc, hint)
+        log.error("%s%s.", where, exc.strerror or exc)
         return EXIT_ERROR
 
 

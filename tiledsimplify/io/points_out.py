@@ -218,7 +218,7 @@ def _reserve(fh, offset, size, path):
         except OSError as e:
             if e.errno in (errno.EOPNOTSUPP, errno.EINVAL):  # the file system cannot: as is
                 return
-            raise InputError(f"{path}: cannot reserve {size / 2**20:.0f} MB for the output "
+            raise InputError(f"{path}: cannot reserve {_size(size)} for the output "
                              f"({e.strerror}); free disk space or write elsewhere.") from e
 
 

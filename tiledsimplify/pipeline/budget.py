@@ -72,11 +72,11 @@ def _select(sequences, tiles, rank, counts=None):
     lo, bits = 0, 64  # the level's key lies in [lo, lo + 2**bits)
     size = None  # keys in that range (unknown before the first pass)
     while True:
+        shift = max(bits - DIGIT, 0)  # the digit of this pass: bits shift .. bits - 1
         if counts is not None:
             hist, counts = counts, None
         else:
             final = bits == 0 or (size is not None and size <= COLLECT)
-            shift = max(bits - DIGIT, 0)
             hi = lo + (1 << bits)
             hist = np.zeros(1 << DIGIT, dtype=np.int64)
             kept, below, equal = {}, {}, {}
@@ -103,7 +103,6 @@ def _select(sequences, tiles, rank, counts=None):
                     below[t] += i
                     equal[t] = int(np.searchsorted(k, level, side="right")) - i
                 return int(level), below, equal
-        shift = max(bits - DIGIT, 0)
         cum = np.cumsum(hist)
         d = int(np.searchsorted(cum, rank, side="left"))
         rank -= int(cum[d - 1]) if d else 0

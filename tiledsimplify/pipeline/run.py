@@ -38,7 +38,12 @@ from ..tiles import TileStore
 from .budget import kept_in_tile, plan_cut, store_sequences
 from .input_order import InputRanks
 from .tile_refine import cut_hausdorff, is_refined, refine_phases, refine_tile
-from .tile_task import deviation_histogram, simplify_tile, threshold_from_histogram
+from .tile_task import (
+    NORMAL_DTYPE,
+    deviation_histogram,
+    simplify_tile,
+    threshold_from_histogram,
+)
 
 log = logging.getLogger("tiledsimplify")
 
@@ -537,7 +542,8 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
 
 
 #: the columns of a non-LAS output after x, y, z (normals as the tile store keeps them)
-OUTPUT_COLUMNS = {"sharp_edge": np.uint8, "nx": np.float32, "ny": np.float32, "nz": np.float32}
+OUTPUT_COLUMNS = {"sharp_edge": np.uint8, "nx": NORMAL_DTYPE, "ny": NORMAL_DTYPE,
+                  "nz": NORMAL_DTYPE}
 
 
 def _record_bytes(output, source):
@@ -587,9 +593,7 @@ def _write_output(ts, source, output, prefix, refined=False):
     for i in range(ts.n_tiles):
         ranks.add(ts.core_index(i)[_keep(ts, i, prefix, refined)])
     n_out = len(ranks)
-    f = ts.read_result(0, "normal").dtype if ts.n_tiles else np.float32  # as stored
-    columns = {**OUTPUT_COLUMNS, "nx": f, "ny": f, "nz": f}
-    with PointsAt(output, n_out, columns) as out:
+    with PointsAt(output, n_out, OUTPUT_COLUMNS) as out:
         for i in range(ts.n_tiles):
             keep, boundary = _kept(ts, i, prefix, refined)
             xyz, idx = ts.core(i)

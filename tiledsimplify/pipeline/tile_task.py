@@ -19,6 +19,9 @@ from ..core.simplify import Neighbourhoods, neighbourhood_state
 from ..errors import BudgetWarning, InputError
 from ..tiles import TileStore
 
+#: dtype of the normals a tile stores (and the output writes)
+NORMAL_DTYPE = np.float32
+
 
 def _ignore_tile_budget_warnings():
     """A tile that cannot reach its floor is exhausted, not short of a budget: the global cut
@@ -152,7 +155,7 @@ def simplify_tile(store_path, tile, options, threshold, depth):
     imp = np.full(n_core, np.nan)
     boundary = np.zeros(n_core, dtype=bool)
     protect = np.zeros(n_core, dtype=bool)
-    normal = np.zeros((n_core, 3), dtype=np.float32)
+    normal = np.zeros((n_core, 3), dtype=NORMAL_DTYPE)
     kind, value = depth
     _ignore_tile_budget_warnings()
     exhausted, n_steps = True, 0
@@ -193,7 +196,7 @@ def simplify_tile(store_path, tile, options, threshold, depth):
         imp[res.order[core]] = at[core]
         boundary = res.boundary[:n_core]
         protect = protected(res.deviation[:n_core], res.threshold)
-        normal = res.normals[:n_core].astype(np.float32)
+        normal = res.normals[:n_core].astype(NORMAL_DTYPE)
     store.write_result(tile, {"step": step, "importance": imp, "boundary": boundary,
                               "protected": protect, "normal": normal}, overwrite=True,
                        attrs={"exhausted": bool(exhausted), "steps": n_steps,
