@@ -229,9 +229,15 @@ def test_flat_tile_runs_deeper_than_its_floor_and_the_cut_stays_exact(tmp_path):
     np.testing.assert_array_equal(X[keep], kept)
 
 
-def test_coverage_mode_floor_changes_the_time_never_the_output(tmp_path):
+def test_coverage_mode_floor_changes_the_time_never_the_output(tmp_path, monkeypatch):
     # mode "coverage" simplifies the halo with the core; tiles stopped at the target share
     # (floor 0.99) must be run deeper by the global cut and give the bytes of a deep first pass
+    # — the deeper pass rebuilding the neighbourhoods, which no pass saves in this mode
+    saved = []
+    write_state = TileStore.write_state
+    monkeypatch.setattr(TileStore, "write_state",
+                        lambda self, tile, *a, **k: (saved.append(tile),
+                                                     write_state(self, tile, *a, **k)))
     rng = np.random.default_rng(6)
     xy = rng.random((5000, 2)) * [4.0, 1.0]
     X = np.c_[xy, np.where(xy[:, 0] < 2.0, 0.0, 0.1 * np.sin(5 * xy[:, 0]))]
@@ -241,6 +247,10 @@ def test_coverage_mode_floor_changes_the_time_never_the_output(tmp_path):
     b = run(path, tmp_path / "b.npy", ratio=0.2, tile_points=900, floor=0.05)
     assert a.reached and b.reached and a.n_tiles >= 4
     assert a.n_deeper >= 1
+    assert saved == []
+    # mode "paper" builds every tile's state in its threshold pass and saves it for the others
+    p = run(path, tmp_path / "p.npy", ratio=0.2, tile_points=900, options={"mode": "paper"})
+    assert sorted(saved) == list(range(p.n_tiles))
     assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
 
 

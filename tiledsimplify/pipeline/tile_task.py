@@ -51,15 +51,23 @@ def _save_state(store, tile, state, n_points):
 
 
 def _state(store, tile, xyz, frozen, options):
-    """The tile's neighbourhood state: restored from the store, else built and saved there,
-    so that no later pass over the tile (the tile pass after the threshold pass, a deeper
-    pass) builds it again."""
+    """The tile's neighbourhood state: restored from the store if the threshold pass saved
+    it there (mode "paper"), else built — and not saved.
+
+    Saving it for a deeper pass cost more than it saved: the state is ~70 B a point on disk
+    (zarr, compressed; ~120 B in memory), so every tile's state at once — they all live
+    until the global cut — made the store's peak ~2.5x its final size (~110 B a point: 110
+    GB for a billion points), and writing it took 7-12 % of the time to build it, on every
+    tile, while a deeper pass (which rebuilds it now) runs on few tiles or none (0 of 10 on
+    the 1M scan of ``benchmarks/pipeline_speed.py``, 0 of 9 on lone-star.laz at the default
+    floor; alternating in one process, the whole run took 0.93-0.96x the time). Mode
+    "paper" must build every state before its threshold is known, so there the threshold
+    pass saves them and the later passes restore them.
+    """
     saved = store.read_state(tile)
     if saved is not None and saved[1].get("n_points") == len(xyz):
         return Neighbourhoods.from_arrays(saved[0], saved[1]["how"])
-    state, _ = neighbourhood_state(xyz, frozen, options)
-    _save_state(store, tile, state, len(xyz))
-    return state
+    return neighbourhood_state(xyz, frozen, options)[0]
 
 
 def deviation_histogram(store_path, tile, options):
