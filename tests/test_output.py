@@ -147,3 +147,37 @@ def test_run_checks_the_space_for_its_output_before_the_work(tmp_path, monkeypat
                                          r"4 KB free"):
         run(tmp_path / "in.npy", tmp_path / "out.npy", ratio=0.5, store=tmp_path / "store")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.npy"]
+
+
+@pytest.mark.parametrize("given", [True, False])
+def test_run_checks_the_space_for_a_new_tile_store_before_the_work(tmp_path, monkeypatch,
+                                                                   given):
+    """Room for the output (36 KB) but not for it and the store's 20 B a point (2,000 points,
+    one file system): refused before the ingest, naming the store and how to move it."""
+    import shutil
+    import tempfile
+    from collections import namedtuple
+
+    from tiledsimplify.errors import InputError
+    from tiledsimplify.pipeline import run
+    X = np.random.default_rng(0).random((2000, 3))
+    np.save(tmp_path / "in.npy", X)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", None)  # read TMPDIR again
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**6, 10**6 - 50_000, 50_000))
+    store = tmp_path / "runs" / "store" if given else None  # its folder made by the run
+    fix = "give --store a directory with room" if given else "set TMPDIR"
+    with pytest.raises(InputError, match=r"tile store of 2,000 points \(with the output, "
+                                         r"on the same file system\) needs at least 75 KB but "
+                                         rf"{tmp_path} has 49 KB free; free disk space or {fix}"):
+        run(tmp_path / "in.npy", tmp_path / "out.npy", ratio=0.5, store=store)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.npy"]
+    # with the room it runs; a resumed store is not checked again
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**6, 0, 10**6))
+    run(tmp_path / "in.npy", tmp_path / "out.npy", ratio=0.5, store=store)
+    if given:
+        monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**6, 10**6 - 40_000, 40_000))
+        (tmp_path / "out.npy").unlink()
+        run(tmp_path / "in.npy", tmp_path / "out.npy", ratio=0.5, store=store)
+        assert len(np.load(tmp_path / "out.npy")) == 1000

@@ -20,14 +20,24 @@ from ..errors import FileFormatError, InputError
 SUFFIXES = (".npy", ".ply", ".xyz", ".txt", ".csv")
 
 
-def check_space(path, need):
+def check_space(path, need, what="the output", fix="write elsewhere", name=None):
     """Fail now, not after the work, if the directory of ``path`` has less than ``need``
-    bytes free (a lower bound of the output's size)."""
+    bytes free (a lower bound of what ``what`` will take there); the error starts with
+    ``name``, else ``path``."""
     path = Path(path)
-    free = shutil.disk_usage(path.parent).free
+    where = existing_parent(path)
+    free = shutil.disk_usage(where).free
     if free < need:
-        raise InputError(f"{path}: the output needs at least {_size(need)} but {path.parent} "
-                         f"has {_size(free)} free; free disk space or write elsewhere.")
+        raise InputError(f"{name or path}: {what} needs at least {_size(need)} but {where} "
+                         f"has {_size(free)} free; free disk space or {fix}.")
+
+
+def existing_parent(path):
+    """The nearest existing directory above ``path`` (where it would be made)."""
+    where = Path(path).absolute().parent
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    return where
 
 
 def _size(n):

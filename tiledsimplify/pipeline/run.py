@@ -31,6 +31,7 @@ from .. import __version__
 from ..core import SimplifyOptions, compile_cache, edge_fit
 from ..core.result import resolve_target
 from ..errors import InputError, TiledSimplifyError
+from ..io import points_out
 from ..io.las import LAS_SUFFIXES
 from ..io.points_out import PointsAt, check_output, check_space, record_bytes
 from ..io.sources import open_source
@@ -365,7 +366,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"{output}: LAS/LAZ output needs LAS/LAZ input (it keeps the input's "
                          "point records); write .ply, .npy, .xyz or .csv instead.")
     check_output(output, LAS_SUFFIXES)
-    check_space(output, target * _record_bytes(output, source))
+    _check_room(output, target * _record_bytes(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
     if tile_points is None:
         tile_points = default_tile_points(n)
@@ -544,6 +545,32 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
 #: the columns of a non-LAS output after x, y, z (normals as the tile store keeps them)
 OUTPUT_COLUMNS = {"sharp_edge": np.uint8, "nx": NORMAL_DTYPE, "ny": NORMAL_DTYPE,
                   "nz": NORMAL_DTYPE}
+
+
+#: bytes a new tile store takes on disk per input point, at least: its compressed
+#: coordinates, input indices and per-point results took 43 B a point for the 1M scan of
+#: ``benchmarks/pipeline_speed.py`` and lone-star.laz, 51 B for autzen_trim.laz
+STORE_BYTES = 20
+
+
+def _check_room(output, output_bytes, store, n):
+    """Refuse now, not hours in, if the output's directory or a new tile store's (the
+    temporary directory by default) cannot hold a lower bound of what they will take; on
+    one file system, of both."""
+    check_space(output, output_bytes)
+    if store is not None and Path(store).exists():
+        return  # a resumed store: already (mostly) written
+    at = Path(store) if store is not None else Path(tempfile.gettempdir()) / "store"
+    need = n * STORE_BYTES
+    same = os.stat(points_out.existing_parent(at)).st_dev == os.stat(
+        points_out.existing_parent(output)).st_dev
+    what = f"the {'' if store is not None else 'temporary '}tile store of {n:,} points"
+    if same:
+        need += output_bytes
+        what += " (with the output, on the same file system)"
+    fix = ("give --store a directory with room" if store is not None else
+           "set TMPDIR (or give --store) to a directory with room")
+    check_space(at, need, what, fix, name=None if store is not None else at.parent)
 
 
 def _record_bytes(output, source):
