@@ -325,6 +325,32 @@ def test_halo_points_match_brute_force(sp_data, sp_store):
     assert sp_store.halo_points(0)[1].size > 0
 
 
+def test_tile_halo_is_saved_once_and_read_back_the_same(sp_data, tmp_path):
+    # a store of its own: the module's store must stay free of saved halos for the others
+    xyz, attrs = sp_data
+    store = TileStore.create(tmp_path / "store", make_chunks(xyz, attrs, 30_000),
+                             tile_points=20_000, config=CONFIG, provenance=PROVENANCE,
+                             sample_size=50_000)
+    for t in range(store.n_tiles):
+        want = store.halo_points(t, owners=True)
+        first = store.tile_halo(t)
+        again = TileStore.open(store.path).tile_halo(t)  # from the saved group
+        for w, f, a in zip(want, first, again):
+            assert np.array_equal(w, f) and np.array_equal(w, a) and w.dtype == a.dtype
+        # each point is the owner's core point at that row
+        xyz_t, idx_t, owner, row = again
+        for j in np.unique(owner):
+            cx, ci = store.core(int(j))
+            at = owner == j
+            assert np.array_equal(cx[row[at]], xyz_t[at]) and np.array_equal(ci[row[at]],
+                                                                              idx_t[at])
+    # saved for another halo width: not used
+    store._write_group(0, "halo", {k: v[:1] for k, v in zip(
+        ("xyz", "index", "owner", "row"), store.halo_points(0, owners=True))},
+        {"halo": store.halo * 2})
+    assert np.array_equal(store.tile_halo(0)[1], store.halo_points(0)[1])
+
+
 def test_attributes_round_trip(sp_data, sp_store):
     xyz, attrs = sp_data
     assert sp_store.attribute_names == list(attrs)

@@ -71,7 +71,7 @@ def _view(store, tile, cut, refined=()):
     points of the tiles in ``refined`` (earlier phases) as they refined them, the rest as the
     cut keeps them."""
     core_xyz, _ = store.core(tile)
-    halo_xyz, _, owner, row = store.halo_points(tile, owners=True)
+    halo_xyz, _, owner, row = store.tile_halo(tile)
     keep = np.zeros(len(core_xyz) + len(halo_xyz), dtype=bool)
     keep[:len(core_xyz)] = _kept(store, tile, cut)
     halo_keep = keep[len(core_xyz):]

@@ -38,7 +38,7 @@ BINS = np.concatenate([[0.0], np.geomspace(1e-7, 4.0, 4095)])
 
 def _tile_cloud(store, tile):
     core_xyz, core_idx = store.core(tile)
-    halo_xyz, halo_idx = store.halo_points(tile)
+    halo_xyz = store.tile_halo(tile)[0]
     xyz = np.concatenate([core_xyz, halo_xyz])
     frozen = np.zeros(len(xyz), dtype=bool)
     frozen[len(core_xyz):] = True
