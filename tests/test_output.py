@@ -117,6 +117,10 @@ def test_a_full_disk_names_the_output(tmp_path, monkeypatch, caplog):
         == EXIT_ERROR
     assert "o.npy: writing the output failed" in caplog.text
     monkeypatch.undo()
+    las_in = tmp_path / "in.las"
+    las = laspy.LasData(laspy.LasHeader(point_format=0, version="1.2"))
+    las.x, las.y, las.z = (np.arange(300.0), np.arange(300.0) % 7, np.arange(300.0) % 3)
+    las.write(las_in)
 
     def lazrs_fails(self):
         raise RuntimeError("IoError: Failed to call write")
@@ -124,11 +128,20 @@ def test_a_full_disk_names_the_output(tmp_path, monkeypatch, caplog):
     header = laspy.LasHeader(point_format=0, version="1.2")
     header.scales, header.offsets = [1e-6] * 3, [0.0] * 3
     dims = [d for d in header.point_format.dimension_names if d not in ("X", "Y", "Z")]
-    with pytest.raises(FileFormatError, match=r"out\.laz: writing the output failed .*Failed "
-                                              r"to call write.*free space"):
+    with pytest.raises(OSError, match=r"writing the output failed .*Failed to call write.*"
+                                      r"free space") as info:
         write_las(tmp_path / "out.laz", header, np.zeros((5, 3)),
                   {d: np.zeros(5, np.uint8) for d in dims}, extra_dims={})
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.xyz"]
+    assert info.value.filename == str(tmp_path / "out.laz")
+    assert not isinstance(info.value, FileFormatError)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las", "in.xyz"]
+    # the same exit code as the NPY output's: the machine failed, not the input
+    caplog.clear()
+    assert main(["run", str(las_in), str(tmp_path / "o.laz"), "--ratio", "0.5", "-q",
+                 "--no-progress"]) == EXIT_ERROR
+    assert "o.laz: writing the output failed (RuntimeError: IoError: Failed to call write)" \
+        in caplog.text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.las", "in.xyz"]
 
 
 def test_run_checks_the_space_for_its_output_before_the_work(tmp_path, monkeypatch):

@@ -819,13 +819,16 @@ class LasOutput:
         self.count += m
 
     def _write_error(self, exc):
-        """The error to raise when the writer fails: the output named, and where to look
-        (lazrs reports a full disk as ``IoError: Failed to call write``, not an OSError)."""
+        """The error to raise when the writer fails: an OSError naming the output and where
+        to look, as a failed NPY/PLY/text write raises (:func:`.points_out._temporary`; the
+        command line exits 1 for both: the machine failed, not the input). lazrs reports a
+        full disk as ``IoError: Failed to call write``, not as an OSError."""
         if isinstance(exc, OSError) and exc.errno != errno.ENOSPC:
             return exc
-        return FileFormatError(f"{self.path}: writing the output failed ({type(exc).__name__}: "
-                               f"{exc}); check that {self.path.parent} has free space, or "
-                               "write elsewhere.")
+        code = exc.errno if isinstance(exc, OSError) else errno.EIO
+        return OSError(code, f"writing the output failed ({type(exc).__name__}: {exc}); check "
+                             f"that {self.path.parent} has free space, or write elsewhere",
+                       str(self.path))
 
     def _set(self, rec, name, values, m):
         values = np.asarray(values)
