@@ -254,6 +254,18 @@ def test_coverage_mode_floor_changes_the_time_never_the_output(tmp_path, monkeyp
     assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
 
 
+def test_a_single_tile_runs_exactly_to_the_target(tmp_path):
+    # one tile alone sets the global cut: it stops at the target, and no deeper pass is needed
+    X = np.random.default_rng(8).random((3000, 3)) * [1.0, 1.0, 0.05]
+    np.save(tmp_path / "in.npy", X)
+    s = run(tmp_path / "in.npy", tmp_path / "out.npy", ratio=0.2, store=tmp_path / "store",
+            workers=1)
+    ts = TileStore.open(tmp_path / "store")
+    assert ts.n_tiles == 1 and s.reached and s.n_deeper == 0
+    assert ts.result_attrs(0)["steps"] == len(X) - s.target
+    assert len(np.load(tmp_path / "out.npy")) == s.target == 600
+
+
 @pytest.fixture(scope="module")
 def cluster():
     distributed = pytest.importorskip("distributed")
