@@ -77,7 +77,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import FileFormatError, InputError
-from .points_out import publish
+from .points_out import publish, write_failed
 
 __all__ = [
     "LAS_SUFFIXES",
@@ -819,16 +819,13 @@ class LasOutput:
         self.count += m
 
     def _write_error(self, exc):
-        """The error to raise when the writer fails: an OSError naming the output and where
-        to look, as a failed NPY/PLY/text write raises (:func:`.points_out._temporary`; the
-        command line exits 1 for both: the machine failed, not the input). lazrs reports a
-        full disk as ``IoError: Failed to call write``, not as an OSError."""
+        """The error to raise when the writer fails: :func:`.points_out.write_failed`, as for
+        every output (lazrs reports a full disk as ``IoError: Failed to call write``, not as
+        an OSError); other OSErrors as they are."""
         if isinstance(exc, OSError) and exc.errno != errno.ENOSPC:
             return exc
-        code = exc.errno if isinstance(exc, OSError) else errno.EIO
-        return OSError(code, f"writing the output failed ({type(exc).__name__}: {exc}); check "
-                             f"that {self.path.parent} has free space, or write elsewhere",
-                       str(self.path))
+        return write_failed(self.path, f"{type(exc).__name__}: {exc}",
+                            exc.errno if isinstance(exc, OSError) else None)
 
     def _set(self, rec, name, values, m):
         values = np.asarray(values)

@@ -154,6 +154,15 @@ def publish(tmp, path):
     os.replace(tmp, path)
 
 
+def write_failed(path, detail, code=None):
+    """The OSError for an output whose write failed (a full disk, mostly; writers report it
+    in their own words, ``detail``): names ``path`` and the fix; ``errno`` ``code``, EIO if
+    none. Every writer raises it, so the command line exits 1 for all of them."""
+    return OSError(code if code is not None else errno.EIO,
+                   f"writing the output failed ({detail}); check that {Path(path).parent} has "
+                   "free space, or write elsewhere", str(path))
+
+
 @contextlib.contextmanager
 def _temporary(path):
     """A temporary file beside ``path`` (yields its open binary handle and its name), renamed
@@ -165,9 +174,7 @@ def _temporary(path):
             with os.fdopen(fd, "wb") as fh:
                 yield fh, tmp
         except OSError as e:  # numpy's short write says "N requested and M written", no file
-            raise OSError(e.errno if e.errno is not None else errno.EIO,
-                          f"writing the output failed ({e}); check that {path.parent} has free "
-                          "space, or write elsewhere", str(path)) from e
+            raise write_failed(path, str(e), e.errno) from e
         publish(tmp, path)
     except BaseException:
         try:

@@ -37,7 +37,7 @@ BINS = np.concatenate([[0.0], np.geomspace(1e-7, 4.0, 4095)])
 
 
 def _tile_cloud(store, tile):
-    core_xyz, core_idx = store.core(tile)
+    core_xyz = store.core(tile)[0]
     halo_xyz = store.tile_halo(tile)[0]
     xyz = np.concatenate([core_xyz, halo_xyz])
     frozen = np.zeros(len(xyz), dtype=bool)
