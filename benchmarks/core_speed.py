@@ -16,7 +16,8 @@ failed: the core would have used Qhull). The JIT is warmed first. Clouds:
   points), subsampled;
 * ``flat``: Fandisk sampled exactly on its faces (no noise): Eq. (1) is exactly 0 on the flat
   faces, the paper's rule empties them and the points around an emptied face become Voronoi
-  neighbours of each other — the worst case for the removal loop (see README).
+  neighbours of each other — the worst case for the removal loop (see docs/measurements.md,
+  "Mode \"paper\": unbounded neighbourhoods").
 
     python benchmarks/core_speed.py                        # default cases
     python benchmarks/core_speed.py scan:100000 bunny:300000

@@ -149,9 +149,9 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
     tests 9-13 % cheaper when a test clipped ~20-24 constraints; with the link-only
     constraints of :func:`remove_point` (~11-14) on against off measured within noise
     (positive tests 1.72k vs 1.74-1.83k TSC ticks on 100k scan points, 2 paired runs), so
-    they stay only because they cost nothing either (README "Known limits"). In the initial
-    filter the polygon is still the whole reach disc after six cuts and the tries saved
-    nothing: off there.
+    they stay only because they cost nothing either (docs/measurements.md, "Removal loop").
+    In the initial filter the polygon is still the whole reach disc after six cuts and the
+    tries saved nothing: off there.
 
     ``xa, ya, la, xb, yb, lb`` are scratch buffers of length at least ``ncand + 5``; ``frame``
     is a (3, 3) scratch array.

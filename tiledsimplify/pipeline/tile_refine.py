@@ -39,8 +39,8 @@ output's Hausdorff distance is never above the cut's.
 once (the later tile sees the earlier tile's fill; each fills only for its own core) and faces
 are thinned like the interior. Tiles refined concurrently with a frozen band of width ``G`` at
 their faces instead filled such gaps from both sides and never thinned near faces (kept density
-at faces 1.17x the untiled run's on the Bunny; in phases 1.03x, README "Seams"). A wider halo
-does not close the cut's face gaps.
+at faces 1.17x the untiled run's on the Bunny; in phases 1.03x, README "Seams", history in
+docs/measurements.md). A wider halo does not close the cut's face gaps.
 """
 
 import time
