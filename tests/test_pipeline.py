@@ -530,6 +530,22 @@ def test_default_tile_size_is_an_eighth_of_the_input_within_bounds(bunny, tmp_pa
     assert s.n_tiles == 1 and ts.config["tile_points"] == 100_000
 
 
+def test_ingest_logs_its_progress(bunny, tmp_path, caplog):
+    """A line each time a pass over the input crosses a tenth (chunks of 1,000 of the 8,171
+    points: nine chunks a pass, each crossing one), naming the pass, the share read (floored,
+    so 100 % only once every point is in) and the points."""
+    _, path = bunny
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3_000, chunk_points=1_000)
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("ingest pass")]
+    for k in (1, 2):
+        mine = [line for line in lines if line.startswith(f"ingest pass {k} of 2")]
+        shares = [int(line.split(": ")[1].split(" %")[0]) for line in mine]
+        assert shares == [12, 24, 36, 48, 61, 73, 85, 97, 100], mine  # 1k, 2k, ... of 8,171
+        assert mine[-1].split(" in ")[0].endswith("(8,171 of 8,171 points)"), mine[-1]
+    assert lines[:9] == [line for line in lines if line.startswith("ingest pass 1")]
+
+
 def test_a_target_of_zero_points_keeps_none_without_a_refinement_warning(tmp_path, caplog):
     path = tmp_path / "few.npy"
     np.save(path, np.random.default_rng(3).random((4, 3)))

@@ -247,6 +247,20 @@ def test_partition_for_tile_and_chunk_sizes(tmp_path, tile_points, chunk):
     assert store.n_tiles == 1 if tile_points >= len(xyz) else store.n_tiles > 1
 
 
+def test_create_reports_progress_of_both_passes(tmp_path):
+    """Each pass reports its start (0 points) and the points read so far after every chunk,
+    ending at all of them."""
+    xyz = clustered(25_000, seed=3)
+    calls = []
+    TileStore.create(tmp_path / "s", make_chunks(xyz, size=7_000), tile_points=5_000,
+                     config={}, provenance={}, sample_size=5_000,
+                     progress=lambda k, points: calls.append((k, points)))
+    for k in (1, 2):
+        points = [c for kk, c in calls if kk == k]
+        assert points == [0, 7_000, 14_000, 21_000, 25_000], k
+    assert [k for k, _ in calls] == [1] * 5 + [2] * 5  # pass 1 ends before pass 2 starts
+
+
 def check_random_case(n, tile_frac, chunk, seed, dup):
     # tile_points from n/40 (at most ~80 tiles, to keep the test fast) to 2 n (one tile)
     tile_points = max(1, int(round(n * tile_frac)))

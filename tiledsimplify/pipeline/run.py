@@ -97,8 +97,8 @@ class _Progress:
     process, so it is not lost in worker processes) and, on a terminal or in a notebook, a bar
     redrawn below the log lines (not in log files: cron and Airflow logs get the lines only)."""
 
-    def __init__(self, stage, total, describe, bar, out=None):
-        self.stage, self.total, self.describe = stage, total, describe
+    def __init__(self, stage, total, describe, bar, out=None, unit="tiles"):
+        self.stage, self.total, self.describe, self.unit = stage, total, describe, unit
         self.out = sys.stderr if out is None else out
         interactive = "ipykernel" in sys.modules or (
             hasattr(self.out, "isatty") and self.out.isatty())
@@ -121,8 +121,8 @@ class _Progress:
         left = elapsed * (1 - frac) / frac if frac else float("nan")
         width = 30
         fill = int(round(width * frac))
-        self.out.write(f"\r{self.stage} [{'#' * fill}{' ' * (width - fill)}] {self.done}/"
-                       f"{self.total} tiles {100 * frac:3.0f}% | {elapsed:.0f} s"
+        self.out.write(f"\r{self.stage} [{'#' * fill}{' ' * (width - fill)}] {self.done:,}/"
+                       f"{self.total:,} {self.unit} {100 * frac:3.0f}% | {elapsed:.0f} s"
                        + (f", ~{left:.0f} s left" if 0 < frac < 1 else ""))
         self.out.flush()
 
@@ -130,6 +130,42 @@ class _Progress:
         if self.bar:
             self.out.write("\n")
             self.out.flush()
+
+
+class _IngestProgress:
+    """``TileStore.create``'s ``progress(pass, points)``: a log line at every tenth of each of
+    its two passes over the input (the ingest of a billion points takes a quarter of an hour)
+    and, on a terminal, a bar."""
+
+    PASSES = {1: "bounds and sample", 2: "points to tiles"}
+
+    def __init__(self, n, bar, out=None):
+        self.n, self.bar, self.out = n, bar, out
+        self.report, self.tenths = None, 0
+
+    def __call__(self, pass_number, points):
+        if self.report is None or self.report.stage != f"ingest {pass_number}/2":
+            self.close()
+            self.report = _Progress(f"ingest {pass_number}/2", self.n, None, self.bar,
+                                    out=self.out, unit="points")
+            self.tenths = 0
+        r = self.report
+        r.done = points
+        tenths = 10 * points // self.n if self.n else 10
+        if tenths > self.tenths:
+            self.tenths = tenths
+            if r.bar:
+                r.out.write("\r\033[K")
+            log.info("ingest pass %d of 2 (%s): %d %% (%s of %s points) in %.1f s",
+                     pass_number, self.PASSES[pass_number], 100 * points // max(self.n, 1),
+                     f"{points:,}", f"{self.n:,}", time.perf_counter() - r.t0)
+        if r.bar:
+            r.draw()
+
+    def close(self):
+        if self.report is not None:
+            self.report.close()
+            self.report = None
 
 
 def _whole(value, name):
@@ -397,11 +433,15 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             log.info("resuming from %s: %d of %d tiles done", store_path, len(ts.done_tiles()),
                      ts.n_tiles)
         else:
-            ts = TileStore.create(
-                store_path, source.chunks, tile_points=int(tile_points), halo=halo,
-                n_total=n, config={"fingerprint": fp, **settings},
-                provenance={"input": [str(f) for f in getattr(source, "files", [])],
-                            "output": str(output)})
+            ingest = _IngestProgress(n, progress)
+            try:
+                ts = TileStore.create(
+                    store_path, source.chunks, tile_points=int(tile_points), halo=halo,
+                    n_total=n, config={"fingerprint": fp, **settings},
+                    provenance={"input": [str(f) for f in getattr(source, "files", [])],
+                                "output": str(output)}, progress=ingest)
+            finally:
+                ingest.close()
             log.info("ingested %d points into %d tiles (halo %.4g, spacing %.4g) in %.1f s",
                      n, ts.n_tiles, ts.halo, ts.spacing, time.perf_counter() - clock[0])
         stage("ingest")

@@ -374,7 +374,8 @@ class TileStore:
     def create(cls, path, chunks: ChunkSource, *, tile_points: int, halo: float | None = None,
                config: dict, provenance: dict, sample_size: int = 200_000, seed: int = 0,
                n_total: int | None = None, chunk_rows: int | None = None,
-               buffer_points: int = 2_000_000, overwrite: bool = False) -> "TileStore":
+               buffer_points: int = 2_000_000, overwrite: bool = False,
+               progress=None) -> "TileStore":
         """Stream a point cloud into a new tile store.
 
         Pass 1 reads every chunk once to count the points, check that the chunks cover
@@ -417,6 +418,9 @@ class TileStore:
             buffered until a whole zarr chunk can be written).
         overwrite : bool, default False
             Replace an existing tile store at ``path``.
+        progress : callable, optional
+            ``progress(pass_number, points_read)`` as each pass starts (0 points) and after
+            each of its chunks (points read so far in that pass): the ingest of a billion points takes minutes.
 
         Returns
         -------
@@ -463,10 +467,16 @@ class TileStore:
         intervals: list[tuple[int, int]] = []
         lo = np.full(3, np.inf)
         hi = np.full(3, -np.inf)
+        read = 0
+        if progress is not None:
+            progress(1, 0)
         for item in chunks():
             start, xyz, _ = check(item)
             m = xyz.shape[0]
             intervals.append((start, m))
+            read += m
+            if progress is not None:
+                progress(1, read)
             if not m:
                 continue
             lo = np.minimum(lo, xyz.min(axis=0))
@@ -534,6 +544,9 @@ class TileStore:
         check2 = _ChunkChecker()
         check2.spec = check.spec
         k = 0
+        read = 0
+        if progress is not None:
+            progress(2, 0)
         with ThreadPoolExecutor(max_workers=_WRITE_THREADS) as pool:
             for item in chunks():
                 start, xyz, a = check2(item)
@@ -545,6 +558,7 @@ class TileStore:
                         f"{intervals[k] if k < len(intervals) else None}, got {(start, m)}); "
                         "it must be re-iterable and deterministic")
                 k += 1
+                read += m
                 if not m:
                     continue
                 tile = plan.assign(xyz)
@@ -577,6 +591,8 @@ class TileStore:
                         jobs += new
                 _run_jobs(pool, jobs)
                 del jobs
+                if progress is not None:
+                    progress(2, read)
             if k != len(intervals):
                 raise InputError(f"the chunk source gave {k} chunks on the second pass but "
                                  f"{len(intervals)} on the first; it must be re-iterable")
