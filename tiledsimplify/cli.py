@@ -55,9 +55,10 @@ def _parser():
 
     r = sub.add_parser(
         "run", help="simplify a cloud of any size, tile by tile, in parallel",
-        description="Stream the input into a zarr tile store, simplify every tile with its "
-                    "halo frozen (dask), cut all tiles at one global budget and write one "
-                    "output. LAS/LAZ output keeps every input dimension and adds sharp_edge, "
+        description="Stream the input into a zarr tile store, simplify every tile with the "
+                    "points of its halo as neighbours (on dask workers), cut all tiles at one "
+                    "global budget, refine the gaps and write one output. LAS/LAZ output keeps "
+                    "every input dimension and adds sharp_edge, "
                     "importance, simplify_rank.")
     r.add_argument("input", help="LAS/LAZ file, folder or glob of LAS/LAZ tiles; or PLY, "
                                  "XYZ/CSV/TXT, NPY")
