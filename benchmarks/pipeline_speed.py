@@ -12,6 +12,8 @@ part-way still shows its rate.
     python benchmarks/pipeline_speed.py --floor 0.25 1000000
     python benchmarks/pipeline_speed.py --one scan.laz 2 150000 0.5 > w2.json  # one run
     python benchmarks/pipeline_speed.py --table w1.json w2.json                # its table
+    python benchmarks/pipeline_speed.py --survey 10 10000000 survey/          # 100M in 10 files
+    python benchmarks/pipeline_speed.py --one survey 2 500000 0.5 > w100m.json  # out_2.laz beside
 """
 
 import json
@@ -29,7 +31,7 @@ import numpy as np
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
-def make_laz(n, path):
+def make_laz(n, path, seed=0, shift=(0.0, 0.0, 0.0)):
     import laspy
 
     from tiledsimplify.io import read_mesh
@@ -38,7 +40,8 @@ def make_laz(n, path):
     V = (V - V.min(0)) / (V.max(0) - V.min(0)).max()
     P, _ = scan(V, F, n_points=min(n, 200_000), views=6, seed=0)
     s = spacing(P) * np.sqrt(min(n, 200_000) / n)
-    P, _ = scan(V, F, n_points=n, views=6, noise=0.1 * s, seed=0)
+    P, _ = scan(V, F, n_points=n, views=6, noise=0.1 * s, seed=seed)
+    P = P + np.asarray(shift, dtype=float)
     header = laspy.LasHeader(point_format=0, version="1.2")
     header.scales = np.array([1e-4, 1e-4, 1e-4])
     header.offsets = np.zeros(3)
@@ -47,6 +50,16 @@ def make_laz(n, path):
     las.intensity = np.arange(len(P)) % 65536
     las.write(path)
     return len(P)
+
+
+def make_survey(k, n, folder):
+    """A folder of ``k`` LAZ files of ``n`` points each, as a survey delivers them: the
+    Fandisk scan of :func:`make_laz` (seeds 0..k-1) on a grid of 1.5 m cells, one part a file."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    side = int(np.ceil(np.sqrt(k)))
+    return sum(make_laz(n, folder / f"part_{i:02d}.laz", seed=i,
+                        shift=(1.5 * (i % side), 1.5 * (i // side), 0.0)) for i in range(k))
 
 
 def _rss_mb():
@@ -118,6 +131,8 @@ def table(rows):
 if __name__ == "__main__":
     if len(sys.argv) > 2 and sys.argv[1] == "--table":  # saved --one outputs, one per file
         table([json.loads(Path(f).read_text().strip().splitlines()[-1]) for f in sys.argv[2:]])
+    elif len(sys.argv) == 5 and sys.argv[1] == "--survey":
+        print(make_survey(int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]))
     elif len(sys.argv) == 6 and sys.argv[1] == "--one":
         print(json.dumps(one(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]),
                              float(sys.argv[5]))))
