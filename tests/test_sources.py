@@ -69,6 +69,20 @@ def test_truncated_inputs_fail_naming_the_file(tmp_path, cloud):
         list(open_source(bad).chunks())
 
 
+def test_a_bad_text_line_is_named_by_its_line_in_the_file(tmp_path):
+    """In the second chunk, past a header: the file's line number, the point and the text."""
+    bad = tmp_path / "b.xyz"
+    rows = [f"{i} {i} {i}" for i in range(10)]
+    rows[7] = "7 seven 7"
+    bad.write_text("x y z\n" + "\n".join(rows) + "\n")
+    with pytest.raises(FileFormatError) as err:
+        list(open_source(bad, chunk_points=4).chunks())
+    assert "line 9 (point 7): '7 seven 7' (could not convert string 'seven'" in str(err.value)
+    bad.write_text("1 2 3\n4 5\n")
+    with pytest.raises(FileFormatError, match=r"line 2 \(point 1\): '4 5'"):
+        list(open_source(bad, chunk_points=4).chunks())
+
+
 @pytest.mark.parametrize("suffix", [".ply", ".xyz", ".npy"])
 def test_non_finite_points_fail_naming_the_file_and_the_point(tmp_path, cloud, suffix):
     bad = cloud.copy()

@@ -101,10 +101,26 @@ class TextSource:
                     xyz = np.loadtxt(lines, delimiter=self._delimiter, usecols=(0, 1, 2),
                                      dtype=np.float64, ndmin=2)
                 except ValueError as exc:
-                    raise FileFormatError(f"{path}: unreadable point line near point {start} "
-                                          f"({exc}); fix or remove it.") from None
+                    i, text, why = _first_bad_line(lines, self._delimiter)
+                    where = (f"line {self._skip + start + i + 1} (point {start + i}): "
+                             f"{text.strip()[:80]!r} ({why})" if i is not None
+                             else f"the block of points from {start} ({exc})")
+                    raise FileFormatError(f"{path}: unreadable point line at {where}; "
+                                          "each line needs three numbers x y z; fix or remove "
+                                          "it.") from None
                 yield start, check_finite(xyz, start, self.files), {}
                 start += m
+
+
+def _first_bad_line(lines, delimiter):
+    """``(index, text, why)`` of the first of ``lines`` that does not parse as x y z, or
+    ``(None, None, None)``; run only to name the line in an error, so one line at a time."""
+    for i, line in enumerate(lines):
+        try:
+            np.loadtxt([line], delimiter=delimiter, usecols=(0, 1, 2), dtype=np.float64, ndmin=2)
+        except ValueError as exc:
+            return i, line, str(exc).split(" at row ")[0]
+    return None, None, None
 
 
 def _text_layout(path):
