@@ -84,6 +84,30 @@ def test_cli_exit_codes(cloud, tmp_path, caplog):
         main(["simplify", str(path), str(out)])  # neither --ratio nor --count
 
 
+def test_counts_read_as_whole_numbers_and_run_settings_are_checked(cloud, tmp_path, caplog,
+                                                                    capsys):
+    """``--count 3e2`` and ``3_00`` are 300; ``3.5`` is refused by the parser; workers and
+    tile_points below 1 fail before the work naming the setting; tiny tiles warn."""
+    X, path = cloud
+    for text in ("3e2", "3_00"):
+        out = tmp_path / f"c{text}.npy"
+        assert main(["simplify", str(path), str(out), "--count", text, "-q"]) == EXIT_OK
+        assert len(np.load(out)) == 300
+    with pytest.raises(SystemExit):
+        main(["simplify", str(path), str(out), "--count", "3.5"])
+    assert "expected a whole number" in capsys.readouterr().err
+    out = tmp_path / "r.npy"
+    assert main(["run", str(path), str(out), "--count", "300", "--workers", "0"]) == EXIT_INPUT
+    assert "workers must be at least 1" in caplog.text and not out.exists()
+    assert main(["run", str(path), str(out), "--count", "300", "--tile-points", "0"]) \
+        == EXIT_INPUT
+    assert "tile_points must be at least 1" in caplog.text and not out.exists()
+    caplog.clear()
+    assert main(["run", str(path), str(out), "--count", "300", "--tile-points", "600",
+                 "--no-progress"]) == EXIT_OK
+    assert "cuts 1,200 points into about 2 tiles" in caplog.text and len(np.load(out)) == 300
+
+
 def test_cli_evaluate(cloud, tmp_path, capsys, data_dir):
     import json
     X, path = cloud

@@ -7,6 +7,7 @@ Exit codes: 0 done; 2 bad usage or bad input (the message names the file and the
 
 import argparse
 import logging
+import math
 import os
 import sys
 import time
@@ -27,6 +28,22 @@ log = logging.getLogger("tiledsimplify")
 EXIT_OK, EXIT_ERROR, EXIT_INPUT, EXIT_BUDGET = 0, 1, 2, 3
 
 
+def _count(text):
+    """A whole number of points: ``2000000``, ``2_000_000`` or ``2e6``."""
+    try:
+        return int(text.replace("_", ""))
+    except ValueError:
+        pass
+    try:
+        value = float(text.replace("_", ""))
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value.is_integer()):
+        raise argparse.ArgumentTypeError(f"expected a whole number (2000000, 2_000_000 or 2e6), "
+                                         f"got {text!r}")
+    return int(value)
+
+
 def _parser():
     p = argparse.ArgumentParser(
         prog="tiledsimplify",
@@ -42,7 +59,7 @@ def _parser():
     s.add_argument("output", help="output .ply, .npy, .xyz or .csv")
     g = s.add_mutually_exclusive_group(required=True)
     g.add_argument("--ratio", type=float, help="fraction of points to keep, in (0, 1]")
-    g.add_argument("--count", type=int, help="number of points to keep")
+    g.add_argument("--count", type=_count, help="number of points to keep")
     s.add_argument("--all-points", action="store_true",
                    help="write every input point with its flags and rank, not only the kept")
     s.add_argument("--boundary-threshold", type=float, default=None,
@@ -65,7 +82,7 @@ def _parser():
     r.add_argument("output", help="output .las/.laz (LAS input), .ply, .npy, .xyz or .csv")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--ratio", type=float, help="fraction of points to keep, in (0, 1]")
-    g.add_argument("--count", type=int, help="number of points to keep")
+    g.add_argument("--count", type=_count, help="number of points to keep")
     r.add_argument("--config", help="TOML file: [run] ratio/count/tile_points/halo/floor/"
                                     "scheduler/workers, [simplify] core options (see "
                                     "configs/)")
@@ -74,7 +91,7 @@ def _parser():
     r.add_argument("--workers", type=int, default=None, help="local workers")
     r.add_argument("--store", default=None,
                    help="zarr tile store directory (default: temporary); reuse it to resume")
-    r.add_argument("--tile-points", type=int, default=None,
+    r.add_argument("--tile-points", type=_count, default=None,
                    help="points per tile (default: an eighth of the input, 100000 to 500000)")
     r.add_argument("--halo", type=float, default=None,
                    help="halo width in model units (default: 10 x estimated spacing)")

@@ -53,6 +53,8 @@ SCHEDULERS = ("threads", "processes", "synchronous")
 MIN_TILES = 8
 MIN_TILE_POINTS = 100_000
 MAX_TILE_POINTS = 500_000
+#: below this, a tile is mostly halo (about 10 spacings wide): ``run`` warns
+SMALL_TILE_POINTS = 5_000
 
 
 @dataclass
@@ -405,8 +407,19 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     check_output(output, LAS_SUFFIXES)
     _check_room(output, target * _record_bytes(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
+    if workers is not None and workers < 1:
+        raise InputError(f"workers must be at least 1 (local threads or processes), got "
+                         f"{workers}; leave it out for one per core.")
     if tile_points is None:
         tile_points = default_tile_points(n)
+    elif tile_points < 1:
+        raise InputError(f"tile_points must be at least 1, got {tile_points}; leave it out for "
+                         f"the default ({default_tile_points(n):,} points for this input).")
+    elif tile_points < SMALL_TILE_POINTS and n > tile_points:
+        log.warning("tile_points=%s cuts %s points into about %s tiles: tiles this small are "
+                    "mostly halo and run slowly; the default for this input is %s points",
+                    f"{tile_points:,}", f"{n:,}", f"{math.ceil(n / tile_points):,}",
+                    f"{default_tile_points(n):,}")
     opts = asdict(options)
     settings = {"tile_points": int(tile_points), "halo": halo, "options": opts,
                 "version": __version__}
