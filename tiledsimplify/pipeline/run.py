@@ -455,8 +455,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                                 "output": str(output)}, progress=ingest)
             finally:
                 ingest.close()
-            log.info("ingested %d points into %d tiles (halo %.4g, spacing %.4g) in %.1f s",
-                     n, ts.n_tiles, ts.halo, ts.spacing, time.perf_counter() - clock[0])
+            log.info("ingested %s points into %s tiles (halo %.4g, spacing %.4g) in %.1f s",
+                     f"{n:,}", f"{ts.n_tiles:,}", ts.halo, ts.spacing,
+                     time.perf_counter() - clock[0])
         stage("ingest")
         if warming is not None:  # the kernels' first compile, started before the ingest
             warming.join()
