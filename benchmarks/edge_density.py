@@ -21,19 +21,14 @@ from quality import load_case  # noqa: E402
 def row(name, n_points):
     from tiledsimplify import metrics, simplify_points
     case = load_case(name, n_cad=n_points)
-    truth = metrics.edge_ground_truth(case.X, edge_segments=case.edge_segments,
-                                      spacing=case.spacing)
     t = time.perf_counter()
     res = simplify_points(case.X, ratio=0.2)
     seconds = time.perf_counter() - t
-    flags = res.boundary
-    hit = int((flags & truth).sum())
-    p = hit / max(int(flags.sum()), 1)
-    r = hit / max(int(truth.sum()), 1)
-    f1 = 2 * p * r / (p + r) if p + r > 0 else 0.0
-    return (f"| {name} | {len(case.X):,} | {case.spacing:.4g} | {int(truth.sum()):,} "
-            f"| {int((res.deviation > res.threshold).sum()):,} | {int(flags.sum()):,} "
-            f"| {p:.2f} | {r:.2f} | {f1:.2f} | {seconds:.1f} |")
+    d = metrics.boundary_detection(case.X, res.boundary, edge_segments=case.edge_segments,
+                                   spacing=case.spacing)
+    return (f"| {name} | {len(case.X):,} | {case.spacing:.4g} | {int(d['n_positive']):,} "
+            f"| {int((res.deviation > res.threshold).sum()):,} | {int(d['n_flagged']):,} "
+            f"| {d['precision']:.2f} | {d['recall']:.2f} | {d['f1']:.2f} | {seconds:.1f} |")
 
 
 def main(argv):

@@ -13,7 +13,10 @@ part-way still shows its rate.
     python benchmarks/pipeline_speed.py --one scan.laz 2 150000 0.5 > w2.json  # one run
     python benchmarks/pipeline_speed.py --table w1.json w2.json                # its table
     python benchmarks/pipeline_speed.py --survey 10 10000000 survey/          # 100M in 10 files
-    python benchmarks/pipeline_speed.py --one survey 2 500000 0.5 > w100m.json  # out_2.laz beside
+    python benchmarks/pipeline_speed.py --one survey 2 500000 0.5 > w100m.json
+
+``--one`` writes ``out_WORKERS.laz`` beside its input: for a file inside a survey folder that
+is inside the folder, where a later run on the folder would read it as one more tile.
 """
 
 import json

@@ -31,11 +31,11 @@ EXIT_OK, EXIT_ERROR, EXIT_INPUT, EXIT_BUDGET = 0, 1, 2, 3
 def _count(text):
     """A whole number of points: ``2000000``, ``2_000_000`` or ``2e6``."""
     try:
-        return int(text.replace("_", ""))
+        return int(text)  # int() and float() read "2_000_000" themselves
     except ValueError:
         pass
     try:
-        value = float(text.replace("_", ""))
+        value = float(text)
     except ValueError:
         value = math.nan
     if not (math.isfinite(value) and value.is_integer()):
