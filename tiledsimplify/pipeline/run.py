@@ -45,6 +45,7 @@ from .tile_task import (
     simplify_tile,
     threshold_from_histogram,
 )
+from .workers import check_workers
 
 log = logging.getLogger("tiledsimplify")
 
@@ -433,9 +434,13 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if store is None:
             store_path = Path(held.enter_context(
                 tempfile.TemporaryDirectory(prefix="tiledsimplify-"))) / "store.zarr"
-        else:
-            store_path = Path(store)
+        else:  # absolute: workers elsewhere (another directory, another machine) open it
+            store_path = Path(store).absolute()
             held.enter_context(_exclusive(store_path))
+        if client is not None:  # before the ingest: can every worker reach the store?
+            log.info("%d dask worker(s) at %s can use %s", check_workers(
+                client, store_path.parent, temporary=store is None),
+                getattr(client.scheduler, "address", "the scheduler"), store_path.parent)
         ts = None
         if store_path.exists():
             ts = TileStore.open(store_path)

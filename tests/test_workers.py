@@ -1,0 +1,183 @@
+"""dask.distributed workers are checked before any work: they must reach the tile store by
+its path, write in its directory and run this client's code; a scheduler without workers is
+named instead of waited on forever. Workers that cannot see the store run in a mount namespace
+of their own (``unshare -m``, a tmpfs over the store's directory), as on another machine."""
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from tiledsimplify.errors import InputError, TiledSimplifyError
+from tiledsimplify.io import read_points
+from tiledsimplify.pipeline import run
+from tiledsimplify.pipeline import workers as W
+
+distributed = pytest.importorskip("distributed")
+
+
+@pytest.fixture(scope="module")
+def bunny(data_dir, tmp_path_factory):
+    X = read_points(data_dir / "meshes" / "stanford_bunny" / "bun_zipper_res2.ply.gz")
+    path = tmp_path_factory.mktemp("in") / "bunny.npy"
+    np.save(path, X)
+    return path
+
+
+@pytest.fixture
+def scheduler():
+    """A scheduler with no workers, and a client of it."""
+    with distributed.LocalCluster(n_workers=0, processes=True, dashboard_address=None) as c, \
+            distributed.Client(c) as client:
+        yield client
+
+
+def _namespaces(tmp_path):
+    """Whether this process may mount a tmpfs and a read-only bind in a namespace of its own."""
+    if shutil.which("unshare") is None:
+        return False
+    d = tmp_path / "probe"
+    d.mkdir()
+    cmd = f"mount -t tmpfs tmpfs '{d}' && mount --bind '{d}' '{d}' && mount -o remount,ro,bind '{d}'"
+    return subprocess.run(["unshare", "-m", "--propagation", "private", "sh", "-c", cmd],
+                          capture_output=True, check=False).returncode == 0
+
+
+@pytest.fixture
+def worker_elsewhere(scheduler, tmp_path):
+    """Start a worker of ``scheduler`` in a mount namespace of its own; ``start(hide, how)``
+    mounts a fresh tmpfs over ``hide`` ("hidden") or remounts it read-only ("read-only")."""
+    if not _namespaces(tmp_path):
+        pytest.skip("needs `unshare -m` (a mount namespace) to stand in for another machine")
+    procs = []
+
+    def start(hide, how):
+        mount = (f"mount -t tmpfs tmpfs '{hide}'" if how == "hidden" else
+                 f"mount --bind '{hide}' '{hide}' && mount -o remount,ro,bind '{hide}'")
+        cmd = (f"{mount} && cd / && exec '{sys.executable}' -m distributed.cli.dask_worker "
+               f"{scheduler.scheduler.address} --nthreads 1 --no-dashboard")
+        procs.append(subprocess.Popen(["unshare", "-m", "--propagation", "private", "sh", "-c",
+                                       cmd], stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.DEVNULL))
+        scheduler.wait_for_workers(1, timeout=60)
+    yield start
+    for p in procs:
+        p.terminate()
+        p.wait(timeout=30)
+
+
+def test_a_worker_that_cannot_see_the_store_is_named_before_any_work(bunny, tmp_path,
+                                                                      scheduler,
+                                                                      worker_elsewhere,
+                                                                      monkeypatch):
+    path = bunny
+    shared = tmp_path / "not_shared"
+    shared.mkdir()
+    worker_elsewhere(shared, "hidden")
+    store = shared / "st.zarr"
+    with pytest.raises(InputError, match=r"not_shared: 1 of 1 dask workers cannot see the tile "
+                                         r"store's directory \(tcp://.*\).* file system every "
+                                         r"worker mounts"):
+        run(path, tmp_path / "out.npy", ratio=0.2, client=scheduler, store=store)
+    assert not store.exists() and not (tmp_path / "out.npy").exists()
+    assert [p.name for p in shared.iterdir()] == [".st.zarr.lock"]  # no marker left behind
+    # the temporary store: made under TMPDIR on this machine, and the message says so
+    monkeypatch.setattr(tempfile, "tempdir", str(shared))
+    with pytest.raises(InputError, match=r"temporary tile store is made in .*not_shared.* "
+                                         r"or set TMPDIR"):
+        run(path, tmp_path / "out.npy", ratio=0.2, client=scheduler)
+    assert [p.name for p in shared.iterdir()] == [".st.zarr.lock"]
+
+
+def test_a_worker_that_cannot_write_beside_the_store_is_named(bunny, tmp_path, scheduler,
+                                                             worker_elsewhere):
+    path = bunny
+    shared = tmp_path / "ro"
+    shared.mkdir()
+    worker_elsewhere(shared, "read-only")
+    with pytest.raises(InputError, match=r"ro: 1 of 1 dask workers cannot write in the tile "
+                                         r"store's directory \(tcp://.*OSError: Read-only"):
+        run(path, tmp_path / "out.npy", ratio=0.2, client=scheduler, store=shared / "s.zarr")
+    assert not (shared / "s.zarr").exists()
+
+
+def test_a_scheduler_without_workers_is_named_not_waited_on(bunny, tmp_path, scheduler,
+                                                             monkeypatch):
+    path = bunny
+    monkeypatch.setattr(W, "WORKER_WAIT", 0.5)
+    t = time.perf_counter()
+    with pytest.raises(TiledSimplifyError, match=r"tcp://.*: the dask scheduler has no workers "
+                                                 r"\(none joined within 0 s\)\. Start them "
+                                                 r"\(`dask worker tcp://"):
+        run(path, tmp_path / "out.npy", ratio=0.2, client=scheduler,
+            store=tmp_path / "s.zarr")
+    assert time.perf_counter() - t < 30
+    assert not (tmp_path / "s.zarr").exists() and not (tmp_path / "out.npy").exists()
+
+
+def test_a_relative_store_is_found_by_workers_in_another_directory(bunny, tmp_path,
+                                                                   monkeypatch):
+    # `--store st.zarr`: the workers run elsewhere (here: another working directory), so the
+    # path they are given is absolute
+    path = bunny
+    monkeypatch.chdir(tmp_path)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as c, \
+            distributed.Client(c) as client:
+        client.run(os.chdir, "/")
+        s = run(path, "out.npy", ratio=0.2, client=client, store="st.zarr")
+    assert s.store == str(tmp_path / "st.zarr")
+    assert len(np.load(tmp_path / "out.npy")) == s.target == s.n_output
+
+
+class _Remote:
+    """A client of one worker whose answer to the check is ``reply(function, *args)``."""
+    scheduler = SimpleNamespace(address="tcp://10.0.0.1:8786")
+
+    def __init__(self, reply):
+        self.reply = reply
+
+    def scheduler_info(self):
+        return {"workers": {"tcp://10.0.0.2:40000": {}}}
+
+    def run(self, function, *args, on_error="raise"):
+        return {"tcp://10.0.0.2:40000": self.reply(function, *args)}
+
+
+def test_a_worker_running_other_code_is_named(tmp_path):
+    ok = _Remote(lambda f, *a: f(*a))  # the real probe, in this process: same code
+    assert W.check_workers(ok, tmp_path, temporary=False) == 1
+    other = _Remote(lambda f, *a: {**f(*a), "version": "0.0.9", "code": "0123456789ab"})
+    with pytest.raises(InputError, match=r"tcp://10.0.0.1:8786: 1 of 1 dask workers run other "
+                                         r"tiledsimplify code than this client \(tiledsimplify "
+                                         r".*, sources [0-9a-f]{12}\): tcp://10.0.0.2:40000 on "
+                                         r".* \(tiledsimplify 0.0.9, sources 0123456789ab\)"):
+        W.check_workers(other, tmp_path, temporary=False)
+    missing = _Remote(lambda f, *a: ModuleNotFoundError("No module named 'tiledsimplify'"))
+    with pytest.raises(InputError, match=r"cannot run tiledsimplify's check: tcp://10.0.0.2:40000 "
+                                         r"\(ModuleNotFoundError: No module named 'tiledsimplify'"
+                                         r"\)\. Install tiledsimplify in the workers'"):
+        W.check_workers(missing, tmp_path, temporary=False)
+    assert list(tmp_path.iterdir()) == []  # the marker is removed whatever the answer
+
+
+def test_code_id_follows_the_sources(tmp_path, monkeypatch):
+    a = W.code_id()
+    assert a == W.code_id() and len(a) == 12
+    # a copy of the package with one byte changed hashes differently
+    import tiledsimplify
+    pkg = tmp_path / "tiledsimplify"
+    shutil.copytree(os.path.dirname(tiledsimplify.__file__), pkg,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    fake = pkg / "pipeline" / "workers.py"
+    monkeypatch.setattr(W, "__file__", str(fake))
+    assert W.code_id() == a
+    with open(pkg / "core" / "heap.py", "a") as fh:
+        fh.write("\n")
+    assert W.code_id() != a
