@@ -544,6 +544,37 @@ def test_ingest_logs_its_progress(bunny, tmp_path, caplog):
         assert shares == [12, 24, 36, 48, 61, 73, 85, 97, 100], mine  # 1k, 2k, ... of 8,171
         assert mine[-1].split(" in ")[0].endswith("(8,171 of 8,171 points)"), mine[-1]
     assert lines[:9] == [line for line in lines if line.startswith("ingest pass 1")]
+    # the plan and the store's layout between the passes have a line of their own, in order
+    every = [r.getMessage() for r in caplog.records if r.getMessage().startswith("ingest")]
+    planned = [i for i, m in enumerate(every) if m.startswith("ingest: tiles planned and the "
+                                                              "store laid out in ")]
+    assert planned == [9], every
+
+
+def test_stage_lines_give_the_share_of_points_done_and_the_time_left(bunny, tmp_path, caplog,
+                                                                     monkeypatch):
+    import importlib
+    R = importlib.import_module("tiledsimplify.pipeline.run")  # the module, not run()
+    assert [R._duration(s) for s in (0.4, 89, 90, 738, 5399, 5400, 7560)] == [
+        "0 s", "89 s", "1.5 min", "12.3 min", "90.0 min", "1.5 h", "2.1 h"]
+    clock = iter([100.0, 130.0, 190.0, 250.0])  # the stage starts at 100 s
+    monkeypatch.setattr(R.time, "perf_counter", lambda: next(clock))
+    said = []
+    p = R._Progress("tiles", 3, lambda r, done, total, pace: said.append(pace), False,
+                    points=400)
+    for n_core in (100, 200, 100):  # the largest tiles first: 1/3 of the tiles, 1/4 of points
+        p({"n_core": n_core})
+    assert said == ["; 25 % of points in 30 s, ~1.5 min left",
+                    "; 75 % of points in 1.5 min, ~30 s left", "; 100 % of points in 2.5 min"]
+    monkeypatch.undo()
+    # a whole run: every tile and refinement line ends with its share, the last at 100 %
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        run(bunny[1], tmp_path / "o.npy", ratio=0.2, tile_points=3_000, workers=2)
+    for head in ("tile ", "refined tile "):
+        mine = [r.getMessage() for r in caplog.records if r.getMessage().startswith(head)]
+        shares = [int(m.split("; ")[1].split(" %")[0]) for m in mine]
+        assert len(mine) > 1 and shares == sorted(shares) and shares[-1] == 100, mine
+        assert all(" left" in m for m in mine[:-1]) and " left" not in mine[-1], mine
 
 
 def test_a_target_of_zero_points_keeps_none_without_a_refinement_warning(tmp_path, caplog):

@@ -101,8 +101,9 @@ class _Progress:
     process, so it is not lost in worker processes) and, on a terminal or in a notebook, a bar
     redrawn below the log lines (not in log files: cron and Airflow logs get the lines only)."""
 
-    def __init__(self, stage, total, describe, bar, out=None, unit="tiles"):
+    def __init__(self, stage, total, describe, bar, out=None, unit="tiles", points=None):
         self.stage, self.total, self.describe, self.unit = stage, total, describe, unit
+        self.points_total, self.points = points, 0
         self.out = sys.stderr if out is None else out
         interactive = "ipykernel" in sys.modules or (
             hasattr(self.out, "isatty") and self.out.isatty())
@@ -112,12 +113,26 @@ class _Progress:
 
     def __call__(self, result):
         self.done += 1
+        if isinstance(result, dict):
+            self.points += result.get("n_core", 0)
         if self.bar:
             self.out.write("\r\033[K")
         if self.describe is not None:
-            self.describe(result, self.done, self.total)
+            self.describe(result, self.done, self.total, self.pace())
         if self.bar:
             self.draw()
+
+    def pace(self):
+        """``"; 12 % of points in 3.2 min, ~23 min left"`` for a log line: the share of the
+        stage's points in the tiles done so far, and the time left at that rate (by points, not
+        tiles: the largest tiles run first, so a count of tiles would overstate the time left);
+        empty when the stage's points are not known."""
+        if not self.points_total or not self.points:
+            return ""
+        frac = min(self.points / self.points_total, 1.0)
+        elapsed = time.perf_counter() - self.t0
+        left = f", ~{_duration(elapsed * (1 - frac) / frac)} left" if frac < 1 else ""
+        return f"; {100 * frac:.0f} % of points in {_duration(elapsed)}{left}"
 
     def draw(self):
         frac = self.done / self.total if self.total else 1.0
@@ -136,6 +151,15 @@ class _Progress:
             self.out.flush()
 
 
+def _duration(seconds):
+    """``41 s``, ``12.3 min`` or ``2.1 h``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
 class _IngestProgress:
     """``TileStore.create``'s ``progress(pass, points)``: a log line at every tenth of each of
     its two passes over the input (100M points took 90 s) and, on a terminal, a bar."""
@@ -148,12 +172,18 @@ class _IngestProgress:
 
     def __call__(self, pass_number, points):
         if pass_number != self.pass_number:
+            # between the passes: the plan and the store's layout (5 s at 100M points)
+            gap = None if self.report is None else time.perf_counter() - self.report.last
             self.close()
+            if gap is not None:
+                log.info("ingest: tiles planned and the store laid out in %.1f s (spacing and "
+                         "kd split from the sample, a zarr group a tile)", gap)
             self.report = _Progress(f"ingest {pass_number}/2", self.n, None, self.bar,
                                     out=self.out, unit="points")
             self.pass_number, self.tenths = pass_number, 0
         r = self.report
         r.done = points
+        r.last = time.perf_counter()
         tenths = 10 * points // self.n if self.n else 10
         if tenths > self.tenths:
             self.tenths = tenths
@@ -236,17 +266,20 @@ def _start_compile(client, scheduler, workers):
         1 if scheduler == "synchronous" else workers or os.cpu_count() or 1)
 
 
-def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describe=None):
+def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describe=None,
+             points=None):
     """Run dask delayed ``tasks`` on the chosen scheduler; returns their results in order.
 
-    ``describe(result, done, total)`` is called in this process as each task finishes (any
-    scheduler); ``progress`` adds a bar on a terminal.
+    ``describe(result, done, total, pace)`` is called in this process as each task finishes
+    (any scheduler); ``pace`` is :meth:`_Progress.pace` when ``points``, the stage's core
+    points (the sum of the results' ``n_core``), is given. ``progress`` adds a bar on a
+    terminal.
     """
     if client is None and isinstance(scheduler, str) and scheduler.startswith("tcp://"):
         from distributed import Client
         with Client(scheduler) as c:
-            return _compute(tasks, None, workers, c, progress, stage, describe)
-    report = _Progress(stage, len(tasks), describe, progress)
+            return _compute(tasks, None, workers, c, progress, stage, describe, points)
+    report = _Progress(stage, len(tasks), describe, progress, points=points)
     if report.bar:
         report.draw()
     try:
@@ -297,24 +330,24 @@ def _tile_tasks(func, tiles, weight, args, after=None):
     return list(tasks.values())
 
 
-def _tile_line(result, done, total):
-    log.info("tile %d (%d/%d): %d core + %d halo points, %d boundary, %d removals%s, %.1f s",
+def _tile_line(result, done, total, pace=""):
+    log.info("tile %d (%d/%d): %d core + %d halo points, %d boundary, %d removals%s, %.1f s%s",
              result["tile"], done, total, result["n_core"], result["n_halo"],
              result["n_boundary"], result["steps"],
              " (all)" if result["exhausted"] else f" (up to level {result['level']:.3g})",
-             result["seconds"])
+             result["seconds"], pace)
 
 
-def _refine_line(result, done, total):
+def _refine_line(result, done, total, pace=""):
     log.info("refined tile %d (%d/%d): %d core + %d halo points, %d kept fixed, %d swaps, "
-             "Hausdorff %.4g -> %.4g, %.1f s", result["tile"], done, total, result["n_core"],
-             result["n_halo"], result["n_fixed"], result["swaps"], result["hausdorff_before"],
-             result["hausdorff_after"], result["seconds"])
+             "Hausdorff %.4g -> %.4g, %.1f s%s", result["tile"], done, total,
+             result["n_core"], result["n_halo"], result["n_fixed"], result["swaps"],
+             result["hausdorff_before"], result["hausdorff_after"], result["seconds"], pace)
 
 
-def _threshold_line(result, done, total):
-    log.info("neighbourhoods of tile %d (%d/%d): %d points in %.1f s", result["tile"], done,
-             total, result["n_points"], result["seconds"])
+def _threshold_line(result, done, total, pace=""):
+    log.info("neighbourhoods of tile %d (%d/%d): %d points in %.1f s%s", result["tile"], done,
+             total, result["n_points"], result["seconds"], pace)
 
 
 def default_tile_points(n):
@@ -486,7 +519,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if threshold is None and options.detect_boundary and options.mode == "paper":
             done = _compute(_tile_tasks(deviation_histogram, range(ts.n_tiles), ts.count,
                                         lambda i: (str(store_path), i, opts)),
-                            scheduler, workers, client, progress, "neighbours", _threshold_line)
+                            scheduler, workers, client, progress, "neighbours", _threshold_line,
+                            points=n)
             threshold = threshold_from_histogram(np.sum([d["hist"] for d in done], axis=0),
                                                  options.boundary_k, options.boundary_floor)
             ts.set_run_attrs({"threshold": threshold})
@@ -504,7 +538,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if pending:
             _compute(_tile_tasks(simplify_tile, pending, ts.count, lambda i: (
                 str(store_path), i, opts, thr, ("keep", math.ceil(keep_fraction * ts.count(i))))),
-                scheduler, workers, client, progress, "tiles", _tile_line)
+                scheduler, workers, client, progress, "tiles", _tile_line,
+                points=sum(ts.count(i) for i in pending))
             log.info("simplified %d tiles in %.1f s", len(pending), time.perf_counter() - clock[0])
         stage("tiles")
 
@@ -520,7 +555,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                      len(need))
             _compute(_tile_tasks(simplify_tile, sorted(need), ts.count, lambda i: (
                 str(store_path), i, opts, thr, ("level", need[i]))),
-                scheduler, workers, client, progress, "deeper", _tile_line)
+                scheduler, workers, client, progress, "deeper", _tile_line,
+                points=sum(ts.count(i) for i in need))
         else:
             raise TiledSimplifyError(
                 f"{store_path}: the tiles' removal sequences do not agree between passes (the "
@@ -599,7 +635,8 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
     if pending:
         _compute(_tile_tasks(refine_tile, sorted(pending, key=lambda i: phase[i]), ts.count,
                              lambda i: (str(store_path), i, g, earlier[i]), earlier.get),
-                 scheduler, workers, client, progress, "refine", _refine_line)
+                 scheduler, workers, client, progress, "refine", _refine_line,
+                 points=sum(ts.count(i) for i in pending))
     log.info("refined %d tiles in %d phases (cut Hausdorff %.4g) in %.1f s", n_done, n_phases,
              g, time.perf_counter() - t0)
     return True

@@ -75,7 +75,7 @@ def deviation_histogram(store_path, tile, options):
     reach from ``options``, a :class:`SimplifyOptions` dict with the run's spacing), and
     return the histogram (over :data:`BINS`) of its core points' boundary measure.
 
-    Returns ``{"tile", "hist", "n_points", "seconds"}`` (``n_points``: core + halo).
+    Returns ``{"tile", "hist", "n_points", "n_core", "seconds"}`` (``n_points``: core + halo).
     """
     t0 = time.perf_counter()
     store = TileStore.open(store_path)
@@ -85,7 +85,7 @@ def deviation_histogram(store_path, tile, options):
         state, deviation = neighbourhood_state(xyz, frozen, SimplifyOptions(**options))
         _save_state(store, tile, state, len(xyz))
         hist = np.histogram(np.clip(deviation[:n_core], 0.0, BINS[-1]), bins=BINS)[0]
-    return {"tile": int(tile), "hist": hist, "n_points": int(len(xyz)),
+    return {"tile": int(tile), "hist": hist, "n_points": int(len(xyz)), "n_core": int(n_core),
             "seconds": time.perf_counter() - t0}
 
 
