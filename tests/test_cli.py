@@ -219,3 +219,60 @@ def test_run_writes_a_json_summary_for_pipelines(cloud, tmp_path):
     missing = tmp_path / "no_such_dir" / "run.json"
     assert main(["run", str(path), str(out), "--ratio", "0.25", "--summary", str(missing),
                  "-q"]) == EXIT_INPUT
+
+
+def test_a_failed_run_still_writes_its_summary(tmp_path):
+    import json
+
+    from tiledsimplify import __version__
+    summary, missing = tmp_path / "run.json", tmp_path / "none.xyz"
+    assert main(["run", str(missing), str(tmp_path / "o.npy"), "--ratio", "0.25",
+                 "--summary", str(summary), "-q"]) == EXIT_INPUT
+    assert json.loads(summary.read_text()) == {
+        "input": str(missing), "output": str(tmp_path / "o.npy"), "version": __version__,
+        "exit_code": EXIT_INPUT, "error": f"{missing}: file not found. Check the path."}
+
+
+@pytest.mark.parametrize("name, resumable", [("SIGTERM", False), ("SIGINT", True)])
+def test_a_stopped_run_cleans_up_says_how_to_go_on_and_resumes(tmp_path, name, resumable):
+    """SIGTERM (a scheduler's timeout, a cancelled job) stops a run as Ctrl-C does: no output,
+    no temporary store left, exit code 128 + the signal, a summary saying so; with --store,
+    the same command then goes on from the finished tiles to the same output."""
+    import json
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from tiledsimplify.pipeline import run
+    rng = np.random.default_rng(5)
+    xy = rng.random((60_000, 2))
+    path = tmp_path / "in.npy"
+    np.save(path, np.c_[xy, 0.1 * np.sin(6 * xy[:, 0])])
+    out, summary, store, tmp = (tmp_path / "o.npy", tmp_path / "run.json", tmp_path / "st.zarr",
+                                tmp_path / "tmp")
+    tmp.mkdir()
+    cmd = [sys.executable, "-m", "tiledsimplify", "run", str(path), str(out), "--ratio", "0.2",
+           "--tile-points", "8000", "--workers", "1", "--summary", str(summary),
+           "--no-progress"] + (["--store", str(store)] if resumable else [])
+    sig = getattr(signal, name)
+    p = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env={**os.environ,
+                         "TMPDIR": str(tmp)}, cwd=tmp_path,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    for line in p.stderr:  # the first of 8 tiles is done: 7 to go, and the refinement
+        if " INFO tile " in line:
+            p.send_signal(sig)
+            break
+    rest = p.stderr.read()
+    assert p.wait(timeout=120) == 128 + sig, rest
+    said = f"stopped by {name} after"
+    assert said in rest and ("run the same command (same --store)" in rest) == resumable, rest
+    got = json.loads(summary.read_text())
+    assert got["exit_code"] == 128 + sig and got["error"].startswith(said)
+    assert not out.exists() and list(tmp.iterdir()) == []  # no output, no temporary store
+    assert store.exists() == resumable
+    if resumable:
+        assert main(["run", str(path), str(out), "--ratio", "0.2", "--tile-points", "8000",
+                     "--workers", "1", "--store", str(store), "--no-progress", "-q"]) == EXIT_OK
+        run(path, tmp_path / "whole.npy", ratio=0.2, tile_points=8000, workers=1)
+        assert out.read_bytes() == (tmp_path / "whole.npy").read_bytes()

@@ -2,14 +2,17 @@
 
 Exit codes: 0 done; 2 bad usage or bad input (the message names the file and the fix);
 3 done, but the requested count could not be reached (more boundary points than the budget);
-1 anything unexpected.
+1 anything unexpected; 128 + the signal's number when stopped by SIGINT (130), SIGTERM (143)
+or SIGHUP (129), after the same clean-up as a failure (no partial output, no temporary store).
 """
 
 import argparse
 import logging
 import math
 import os
+import signal
 import sys
+import threading
 import time
 import warnings
 
@@ -26,6 +29,24 @@ from .io.sources import check_finite
 log = logging.getLogger("tiledsimplify")
 
 EXIT_OK, EXIT_ERROR, EXIT_INPUT, EXIT_BUDGET = 0, 1, 2, 3
+
+#: signals that stop a command the way Ctrl-C does (SIGINT): a scheduler's timeout or a job
+#: being cancelled (cron's ``timeout``, Airflow, Slurm, Kubernetes send SIGTERM) and a closed
+#: terminal (SIGHUP). Python's default for them ends the process at once, leaving the
+#: temporary tile store behind (~43 bytes an input point) and no word in the log.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
+class Stopped(BaseException):
+    """A stop signal arrived (not an ``Exception``: nothing on the way may swallow it)."""
+
+    def __init__(self, signum):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _stop(signum, frame):
+    raise Stopped(signum)
 
 
 def _count(text):
@@ -298,27 +319,63 @@ def _simplify(args):
     return EXIT_OK if res.reached else EXIT_BUDGET
 
 
+def _stopped_message(args, signum, seconds):
+    """What a stopped command leaves, and how to go on."""
+    said = f"stopped by {signal.Signals(signum).name} after {seconds:.0f} s"
+    if args.command != "run":
+        return f"{said}; nothing written."
+    if args.store:
+        return (f"{said}; no output written. The finished tiles stay in {args.store}: run the "
+                "same command (same --store) to go on from them.")
+    return (f"{said}; no output written, and the temporary tile store was removed. Give --store "
+            "DIR to make a long run resumable.")
+
+
 def main(argv=None):
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
                         format="%(asctime)s %(levelname)s %(message)s", stream=sys.stderr)
     # laspy logs a read error before raising it; the error we report quotes it with the file
     logging.getLogger("laspy").setLevel(logging.CRITICAL)
+    t0 = time.perf_counter()
+    handlers = {}
+    if threading.current_thread() is threading.main_thread():  # signals reach it alone
+        handlers = {s: signal.signal(s, _stop) for s in STOP_SIGNALS}
     try:
         command = {"run": _run, "simplify": _simplify, "evaluate": _evaluate,
                    "report": _report, "compile": _compile}[args.command]
         return command(args)
     except FileNotFoundError as exc:
-        log.error("%s: file not found. Check the path.", exc.filename or exc)
-        return EXIT_INPUT
+        message = f"{exc.filename or exc}: file not found. Check the path."
+        code = EXIT_INPUT
     except (TiledSimplifyError, ValueError, ImportError) as exc:
-        log.error("%s", exc)
-        return EXIT_INPUT
+        message, code = str(exc), EXIT_INPUT
     except OSError as exc:  # the machine, not the input: a full disk, a lost mount (the
         # output writers' errors say what to do; "No space left on device" says it itself)
         where = f"{exc.filename}: " if exc.filename else ""
-        log.error("%s%s.", where, exc.strerror or exc)
-        return EXIT_ERROR
+        message, code = f"{where}{exc.strerror or exc}.", EXIT_ERROR
+    except (KeyboardInterrupt, Stopped) as exc:  # everything on the way cleaned up after it
+        signum = getattr(exc, "signum", signal.SIGINT)
+        message, code = _stopped_message(args, signum, time.perf_counter() - t0), 128 + signum
+    finally:
+        for s, h in handlers.items():
+            signal.signal(s, h)
+    log.error("%s", message)
+    if args.command == "run" and getattr(args, "summary", None):
+        _failed_summary(args, code, message)
+    return code
+
+
+def _failed_summary(args, code, message):
+    """``--summary`` of a run that failed or was stopped: what was asked, the exit code and
+    the message, so a pipeline reading the file learns as much as from the log."""
+    try:
+        write_json(args.summary, {"input": str(args.input), "output": str(args.output),
+                                  "version": __version__, "exit_code": code, "error": message})
+    except OSError as exc:  # the summary's own path may be what failed
+        log.error("could not write the run summary to %s (%s)", args.summary, exc)
+    else:
+        log.info("wrote the run summary to %s", args.summary)
 
 
 if __name__ == "__main__":
