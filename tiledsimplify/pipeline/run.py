@@ -312,24 +312,28 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
 
 @contextlib.contextmanager
 def _process_pool(workers):
-    """The pool of the "processes" scheduler, made as dask makes its own (its context and
-    worker initializer), but ours to end: a failed or stopped stage terminates the processes.
-    dask's own pool is shut down waiting for the tiles running in it, so a run stopped by
-    SIGTERM went on for another 42 s (3M-point scan, 2 processes)."""
+    """The pool of the "processes" scheduler, made as dask makes its own (a
+    ``ProcessPoolExecutor`` with its context and worker initializer: a worker that dies, say
+    of the OOM killer, fails the stage with ``BrokenProcessPool`` instead of losing its task),
+    but ours to end: a failed or stopped stage terminates the processes. dask shuts its own
+    down waiting for the tiles running in it, so a run stopped by SIGTERM went on for another
+    42 s (3M-point scan, 2 processes)."""
+    from concurrent.futures import ProcessPoolExecutor
+
     from dask.multiprocessing import get_context, initialize_worker_process
     if os.environ.get("PYTHONHASHSEED") in (None, "0"):
         os.environ["PYTHONHASHSEED"] = "6640"  # as dask sets it for the pools it makes
-    pool = get_context().Pool(workers or os.cpu_count() or 1,
-                              initializer=initialize_worker_process)
+    pool = ProcessPoolExecutor(workers or os.cpu_count() or 1, mp_context=get_context(),
+                               initializer=initialize_worker_process)
     try:
         yield pool
     except BaseException:
-        pool.terminate()
+        running = getattr(pool, "_processes", None) or {}  # Python 3.14: terminate_workers()
+        for proc in list(running.values()):
+            proc.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
         raise
-    else:
-        pool.close()
-    finally:
-        pool.join()
+    pool.shutdown(wait=True)
 
 
 def _tile_tasks(func, tiles, weight, args, after=None):
