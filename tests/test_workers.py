@@ -33,7 +33,7 @@ def bunny(data_dir, tmp_path_factory):
 @pytest.fixture
 def scheduler():
     """A scheduler with no workers, and a client of it."""
-    with distributed.LocalCluster(n_workers=0, processes=True, dashboard_address=None) as c, \
+    with distributed.LocalCluster(n_workers=0, processes=True, dashboard_address=":0") as c, \
             distributed.Client(c) as client:
         yield client
 
@@ -128,7 +128,7 @@ def test_a_relative_store_is_found_by_workers_in_another_directory(bunny, tmp_pa
     path = bunny
     monkeypatch.chdir(tmp_path)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as c, \
+                                  dashboard_address=":0") as c, \
             distributed.Client(c) as client:
         client.run(os.chdir, "/")
         s = run(path, "out.npy", ratio=0.2, client=client, store="st.zarr")
@@ -181,3 +181,40 @@ def test_code_id_follows_the_sources(tmp_path, monkeypatch):
     with open(pkg / "core" / "heap.py", "a") as fh:
         fh.write("\n")
     assert W.code_id() != a
+
+
+@pytest.fixture(scope="module")
+def small_worker():
+    """One worker process with a 400 MB memory limit, on a scheduler that gives a task up the
+    first time its worker dies."""
+    import dask
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), \
+            distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                     memory_limit="400MB", dashboard_address=":0") as c, \
+            distributed.Client(c) as client:
+        yield client
+
+
+def test_workers_short_of_memory_for_a_tile_are_warned_of(small_worker, tmp_path, caplog):
+    with caplog.at_level("WARNING", logger="tiledsimplify"):
+        assert W.check_workers(small_worker, tmp_path, temporary=False, tile_points=40_000) == 1
+    assert not caplog.records  # 300 MB + 24 MB fits in 400 MB
+    with caplog.at_level("WARNING", logger="tiledsimplify"):
+        W.check_workers(small_worker, tmp_path, temporary=False, tile_points=500_000)
+    (got,) = [r.getMessage() for r in caplog.records]
+    assert got.startswith("1 dask worker(s) may run out of memory: tcp://")
+    assert "has 400 MB for 1 thread(s), needs ~600" in got
+    assert "--tile-points 166,666 or less" in got
+
+
+def test_a_tile_that_kills_its_workers_is_named_with_the_likely_cause(small_worker):
+    import importlib
+
+    import dask
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    # a tile task's key ends with its tile and the run's token (run._tile_tasks)
+    task = dask.delayed(os._exit, pure=False)(1, dask_key_name="simplify-tile-0000003-7-f00d")
+    with pytest.raises(TiledSimplifyError, match=r"^tile 7 \(tiles\): every dask worker that ran "
+                                                 r"it died \(1, the last tcp://.*\), most likely "
+                                                 r"out of memory.*--memory-limit.*--tile-points"):
+        R._compute([task], None, None, small_worker, False, "tiles")

@@ -45,7 +45,7 @@ from .tile_task import (
     simplify_tile,
     threshold_from_histogram,
 )
-from .workers import check_workers
+from .workers import check_workers, killed_message
 
 log = logging.getLogger("tiledsimplify")
 
@@ -285,9 +285,13 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
     try:
         if client is not None:
             from distributed import as_completed
+            from distributed.scheduler import KilledWorker
             futures = client.compute(tasks)
-            for fut in as_completed(futures):
-                report(fut.result())
+            try:
+                for fut in as_completed(futures):
+                    report(fut.result())
+            except KilledWorker as exc:  # dask's message names the task, not the likely cause
+                raise TiledSimplifyError(killed_message(exc, stage)) from None
             return client.gather(futures)
         if scheduler not in SCHEDULERS:
             raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, "
@@ -501,7 +505,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             held.enter_context(_exclusive(store_path))
         if client is not None:  # before the ingest: can every worker reach the store?
             log.info("%d dask worker(s) at %s can use %s", check_workers(
-                client, store_path.parent, temporary=store is None),
+                client, store_path.parent, temporary=store is None,
+                tile_points=int(tile_points)),
                 getattr(client.scheduler, "address", "the scheduler"), store_path.parent)
         ts = None
         if store_path.exists():

@@ -25,6 +25,15 @@ log = logging.getLogger("tiledsimplify")
 #: seconds a run waits for a first worker to join a scheduler that has none
 WORKER_WAIT = 60.0
 
+#: what a one-thread dask.distributed worker needs for a tile, rounded up: its own process with
+#: the kernels loaded (MB) and bytes per core point of its largest tile (the halo included).
+#: Measured 2026-12-03 (a ``LocalCluster`` of one one-thread worker, its peak RSS by
+#: ``Client.run`` after a whole run; the 3M-point LAZ scan of ``benchmarks/pipeline_speed.py``
+#: at ratio 0.2): 147 MB before any tile; largest tiles of 93,729 / 244,782 / 461,448 core
+#: points (caps 100k / 250k / 500k) gave 321 / 421 / 489 MB, i.e. ~280 MB + ~460 B a point.
+WORKER_BASE_MB = 300
+WORKER_BYTES_PER_POINT = 600
+
 
 def code_id() -> str:
     """A digest of this tiledsimplify's sources and numba's version: equal on two machines
@@ -71,13 +80,55 @@ def _wait_for_workers(client, address):
             "run again; --scheduler threads runs on this machine alone.") from None
 
 
-def check_workers(client, directory, *, temporary: bool) -> int:
+def tile_memory_mb(tile_points: int, threads: int = 1) -> float:
+    """About the memory (MB) a worker running ``threads`` tiles of ``tile_points`` at once
+    needs (:data:`WORKER_BASE_MB`, :data:`WORKER_BYTES_PER_POINT`)."""
+    return WORKER_BASE_MB + threads * WORKER_BYTES_PER_POINT * tile_points / 1e6
+
+
+def killed_message(exc, stage: str) -> str:
+    """The error for dask's ``KilledWorker``: the tile (its task key ends ``-TILE-TOKEN``, see
+    ``run._tile_tasks``), and what most likely killed its workers."""
+    parts = str(exc.task).split("-")
+    tile = parts[-2] if len(parts) >= 3 and parts[-2].isdigit() else str(exc.task)
+    worker = getattr(exc.last_worker, "address", exc.last_worker)
+    return (f"tile {tile} ({stage}): every dask worker that ran it died ({exc.allowed_failures + 1}, "
+            f"the last {worker}), most likely out of memory: a tile needs about "
+            f"{WORKER_BYTES_PER_POINT:,} bytes a point besides the worker's own "
+            f"~{WORKER_BASE_MB} MB. Give the workers more memory (`dask worker --memory-limit`) or "
+            "a smaller --tile-points; with --store, the same command goes on from the finished "
+            "tiles.")
+
+
+def _memory_warning(info: dict, tile_points: int) -> None:
+    """Warn about workers whose memory limit is below what their threads' tiles need."""
+    short = []
+    for worker, w in sorted(info.items()):
+        limit, threads = (w.get("memory_limit") or 0) / 1e6, max(int(w.get("nthreads") or 1), 1)
+        need = tile_memory_mb(tile_points, threads)
+        if limit and limit < need:
+            fits = int((limit - WORKER_BASE_MB) / threads / WORKER_BYTES_PER_POINT * 1e6)
+            short.append((worker, limit, threads, need, fits))
+    if short:
+        log.warning(
+            "%d dask worker(s) may run out of memory: %s. Tiles of up to %s points need about "
+            "%.0f MB a thread; dask retries a tile whose worker dies, then gives up. Give the "
+            "workers more memory (`dask worker --memory-limit`) or --tile-points %s or less.",
+            len(short), "; ".join(f"{w} has {lim:.0f} MB for {t} thread(s), needs ~{need:.0f}"
+                                  for w, lim, t, need, _ in short),
+            f"{tile_points:,}", tile_memory_mb(tile_points) - WORKER_BASE_MB,
+            f"{max(min(f for *_, f in short), 0):,}")
+
+
+def check_workers(client, directory, *, temporary: bool, tile_points: int | None = None) -> int:
     """Check, before any work, that every worker of ``client`` can read and write files in
     ``directory`` (the tile store's) and runs this client's code; returns the worker count.
 
     ``temporary``: the store is the run's temporary one (the fix named differs). Raises
     :class:`~tiledsimplify.errors.InputError` naming each worker that cannot, with its host,
-    and what to do. Workers that join later are not checked.
+    and what to do. With ``tile_points``, warns of workers whose memory limit is below what
+    their threads' tiles need (:func:`tile_memory_mb`). Workers that join later are not
+    checked.
     """
     address = getattr(client.scheduler, "address", "the dask scheduler")
     _wait_for_workers(client, address)
@@ -129,4 +180,6 @@ def check_workers(client, directory, *, temporary: bool) -> int:
             f"this client (tiledsimplify {__version__}, sources {mine}): {', '.join(other)}. "
             "Install the same tiledsimplify and numba on every worker and here: tiles computed "
             "by other code would not fit together.")
+    if tile_points:
+        _memory_warning(client.scheduler_info().get("workers", {}), tile_points)
     return n
