@@ -216,6 +216,9 @@ def test_run_writes_a_json_summary_for_pipelines(cloud, tmp_path):
     assert got["exit_code"] == EXIT_OK and got["input"] == str(path)
     assert got["n_input"] == len(X) and got["n_output"] == len(np.load(out)) == got["target"]
     assert got["seconds"]["total"] > 0 and not list(tmp_path.glob(".run.json.*"))
+    import resource
+    assert 50 < got["peak_rss_mb"] == pytest.approx(
+        resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, rel=0.5)
     missing = tmp_path / "no_such_dir" / "run.json"
     assert main(["run", str(path), str(out), "--ratio", "0.25", "--summary", str(missing),
                  "-q"]) == EXIT_INPUT

@@ -65,7 +65,10 @@ class RunSummary:
     deeper, whether the kept points were refined after the global cut, seconds per stage.
 
     ``seconds``: wall time per stage and ``total``; ``cpu_seconds``: CPU time of this process
-    per stage (all its threads; not the work of other processes or cluster workers).
+    per stage (all its threads; not the work of other processes or cluster workers);
+    ``peak_rss_mb``: this process's peak resident memory so far (on local threads the run's
+    own, whose size follows the tiles'; not that of worker processes), NaN where the system
+    does not say.
     """
 
     n_input: int
@@ -83,9 +86,20 @@ class RunSummary:
     refined: bool = False
     seconds: dict = field(default_factory=dict)
     cpu_seconds: dict = field(default_factory=dict)
+    peak_rss_mb: float = float("nan")
 
     def to_dict(self):
         return asdict(self)
+
+
+def _peak_rss_mb():
+    """This process's peak resident memory in MB (Linux: ``ru_maxrss`` in KB), or NaN."""
+    try:
+        import resource
+    except ImportError:  # not on a POSIX system
+        return float("nan")
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return kb / (1024 * 1024) if sys.platform == "darwin" else kb / 1024  # macOS: bytes
 
 
 def _fingerprint(source, settings):
@@ -623,7 +637,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          n_deeper=n_deeper,
                          store="" if store is None else str(store_path), output=str(output),
                          reached=reached, message=message, refined=refined, seconds=seconds,
-                         cpu_seconds=cpu_seconds)
+                         cpu_seconds=cpu_seconds, peak_rss_mb=_peak_rss_mb())
     log.info("kept %d of %d points (%d boundary) from %d tiles (%d run deeper) in %.1f s "
              "(%.0f input points/s): %s", n_out, n, n_boundary, ts.n_tiles, n_deeper,
              seconds["total"], n / seconds["total"] if seconds["total"] else 0.0,
