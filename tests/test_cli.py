@@ -279,3 +279,19 @@ def test_a_stopped_run_cleans_up_says_how_to_go_on_and_resumes(tmp_path, name, r
                      "--workers", "1", "--store", str(store), "--no-progress", "-q"]) == EXIT_OK
         run(path, tmp_path / "whole.npy", ratio=0.2, tile_points=8000, workers=1)
         assert out.read_bytes() == (tmp_path / "whole.npy").read_bytes()
+
+
+def test_a_stop_signal_is_taken_once():
+    # a second SIGTERM while the first one's clean-up runs is ignored, not a second exception
+    import signal
+
+    from tiledsimplify import cli
+    before = {s: signal.getsignal(s) for s in cli.STOP_SIGNALS}
+    try:
+        with pytest.raises(cli.Stopped) as got:
+            cli._stop(signal.SIGTERM, None)
+        assert got.value.signum == signal.SIGTERM and str(got.value) == "SIGTERM"
+        assert all(signal.getsignal(s) == signal.SIG_IGN for s in cli.STOP_SIGNALS)
+    finally:
+        for s, h in before.items():
+            signal.signal(s, h)

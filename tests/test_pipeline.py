@@ -637,3 +637,40 @@ def test_a_stopped_stage_ends_its_worker_processes():
     # a worker that dies (the OOM killer) fails the stage instead of losing its task
     with pytest.raises(BrokenProcessPool):
         R._compute([dask.delayed(os._exit)(1)], "processes", 1, None, False)
+
+
+def test_a_run_stopped_in_its_ingest_ingests_again_and_an_empty_store_dir_is_used(
+        bunny, tmp_path, monkeypatch, caplog):
+    import importlib
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    X, path = bunny
+    store = tmp_path / "st.zarr"
+    real = R._IngestProgress.__call__
+
+    def stop_in_pass_2(self, pass_number, points):
+        if pass_number == 2 and points > 0:
+            raise KeyboardInterrupt  # Ctrl-C or SIGTERM half-way through the tiles' points
+        return real(self, pass_number, points)
+
+    monkeypatch.setattr(R._IngestProgress, "__call__", stop_in_pass_2)
+    with pytest.raises(KeyboardInterrupt):
+        run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, chunk_points=1000,
+            store=store)
+    monkeypatch.undo()
+    with pytest.raises(Exception, match="incomplete"):
+        TileStore.open(store)
+    # another input's incomplete store is refused, not overwritten
+    np.save(tmp_path / "other.npy", X[::2])
+    with pytest.raises(InputError, match="made for another input"):
+        run(tmp_path / "other.npy", tmp_path / "x.npy", ratio=0.2, tile_points=3000,
+            chunk_points=1000, store=store)
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        s = run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, chunk_points=1000,
+                store=store)
+    assert "its ingest was interrupted; ingesting again" in caplog.text
+    assert s.reached and TileStore.open(store).n_tiles == s.n_tiles
+    # a store directory made beforehand, empty, takes a new store
+    (tmp_path / "made").mkdir()
+    run(path, tmp_path / "fresh.npy", ratio=0.2, tile_points=3000, chunk_points=1000,
+        store=tmp_path / "made")
+    assert (tmp_path / "o.npy").read_bytes() == (tmp_path / "fresh.npy").read_bytes()

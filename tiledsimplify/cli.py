@@ -46,6 +46,8 @@ class Stopped(BaseException):
 
 
 def _stop(signum, frame):
+    for s in STOP_SIGNALS:  # once: a second signal must not cut the clean-up short (a temporary
+        signal.signal(s, signal.SIG_IGN)  # store half deleted); main() restores the handlers
     raise Stopped(signum)
 
 

@@ -35,7 +35,7 @@ from ..io import points_out
 from ..io.las import LAS_SUFFIXES
 from ..io.points_out import PointsAt, check_output, check_space, record_bytes
 from ..io.sources import open_source
-from ..tiles import TileStore
+from ..tiles import IncompleteStoreError, TileStore
 from .budget import kept_in_tile, plan_cut, store_sequences
 from .input_order import InputRanks
 from .tile_refine import cut_hausdorff, is_refined, refine_phases, refine_tile
@@ -100,6 +100,20 @@ def _peak_rss_mb():
         return float("nan")
     kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return kb / (1024 * 1024) if sys.platform == "darwin" else kb / 1024  # macOS: bytes
+
+
+def _is_empty_dir(path):
+    return path.is_dir() and not any(path.iterdir())
+
+
+def _store_fingerprint(path):
+    """The input and settings fingerprint a tile store was made for (read from its root's
+    metadata, which an interrupted ingest writes first), or None."""
+    try:
+        meta = json.loads((Path(path) / "zarr.json").read_text())
+        return meta["attributes"]["config"]["fingerprint"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def _fingerprint(source, settings):
@@ -522,23 +536,33 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 client, store_path.parent, temporary=store is None,
                 tile_points=int(tile_points)),
                 getattr(client.scheduler, "address", "the scheduler"), store_path.parent)
-        ts = None
-        if store_path.exists():
-            ts = TileStore.open(store_path)
-            if ts.config.get("fingerprint") != fp:
-                raise InputError(
-                    f"{store_path}: this tile store was made for another input or other "
-                    "settings; give a new --store directory (or delete this one) to start over.")
-            log.info("resuming from %s: %d of %d tiles done", store_path, len(ts.done_tiles()),
-                     ts.n_tiles)
-        else:
+        ts, again = None, False
+        if _is_empty_dir(store_path):  # made beforehand (mkdir -p): a new store goes there
+            pass
+        elif store_path.exists():
+            other = InputError(
+                f"{store_path}: this tile store was made for another input or other settings; "
+                "give a new --store directory (or delete this one) to start over.")
+            try:
+                ts = TileStore.open(store_path)
+            except IncompleteStoreError:  # its ingest was stopped: no tile was done yet
+                if _store_fingerprint(store_path) != fp:
+                    raise other from None
+                log.info("%s: its ingest was interrupted; ingesting again", store_path)
+                again = True
+            else:
+                if ts.config.get("fingerprint") != fp:
+                    raise other
+                log.info("resuming from %s: %d of %d tiles done", store_path,
+                         len(ts.done_tiles()), ts.n_tiles)
+        if ts is None:
             ingest = _IngestProgress(n, progress)
             try:
                 ts = TileStore.create(
                     store_path, source.chunks, tile_points=int(tile_points), halo=halo,
                     n_total=n, config={"fingerprint": fp, **settings},
                     provenance={"input": [str(f) for f in getattr(source, "files", [])],
-                                "output": str(output)}, progress=ingest)
+                                "output": str(output)}, progress=ingest, overwrite=again)
             finally:
                 ingest.close()
             log.info("ingested %s points into %s tiles (halo %.4g, spacing %.4g) in %.1f s",
@@ -706,7 +730,7 @@ def _check_room(output, output_bytes, store, n):
     temporary directory by default) cannot hold a lower bound of what they will take; on
     one file system, of both."""
     check_space(output, output_bytes)
-    if store is not None and Path(store).exists():
+    if store is not None and Path(store).exists() and not _is_empty_dir(Path(store)):
         return  # a resumed store: already (mostly) written
     at = Path(store) if store is not None else Path(tempfile.gettempdir()) / "store"
     need = n * STORE_BYTES
