@@ -255,13 +255,16 @@ def test_a_stopped_run_cleans_up_says_how_to_go_on_and_resumes(tmp_path, name, r
     out, summary, store, tmp = (tmp_path / "o.npy", tmp_path / "run.json", tmp_path / "st.zarr",
                                 tmp_path / "tmp")
     tmp.mkdir()
-    cmd = [sys.executable, "-m", "tiledsimplify", "run", str(path), str(out), "--ratio", "0.2",
+    # the command line as `tiledsimplify` runs it, with Ctrl-C's handler even where this
+    # process was started with SIGINT ignored (a shell's background job)
+    cmd = [sys.executable, "-c", "import signal, sys; signal.signal(signal.SIGINT, "
+           "signal.default_int_handler); from tiledsimplify.cli import main; "
+           "sys.exit(main(sys.argv[1:]))", "run", str(path), str(out), "--ratio", "0.2",
            "--tile-points", "8000", "--workers", "1", "--summary", str(summary),
            "--no-progress"] + (["--store", str(store)] if resumable else [])
     sig = getattr(signal, name)
     p = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env={**os.environ,
-                         "TMPDIR": str(tmp)}, cwd=tmp_path,
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                         "TMPDIR": str(tmp)}, cwd=tmp_path)
     for line in p.stderr:  # the first of 8 tiles is done: 7 to go, and the refinement
         if " INFO tile " in line:
             p.send_signal(sig)
