@@ -110,10 +110,13 @@ def _parser():
                                     "scheduler/workers, [simplify] core options (see "
                                     "configs/)")
     r.add_argument("--scheduler", default=None,
-                   help="threads (default), processes, synchronous, or tcp://HOST:PORT")
+                   help="threads (default), processes, synchronous, or tcp://HOST:PORT (a "
+                        "dask.distributed scheduler: its workers must see --store at the same "
+                        "path and run this tiledsimplify; checked before the ingest)")
     r.add_argument("--workers", type=int, default=None, help="local workers")
     r.add_argument("--store", default=None,
-                   help="zarr tile store directory (default: temporary); reuse it to resume")
+                   help="zarr tile store directory (default: temporary, under TMPDIR); "
+                        "reuse it to resume after a failure or a stop (Ctrl-C, SIGTERM)")
     r.add_argument("--tile-points", type=_count, default=None,
                    help="points per tile (default: an eighth of the input, 100000 to 500000)")
     r.add_argument("--halo", type=float, default=None,
