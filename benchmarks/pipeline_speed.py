@@ -15,8 +15,9 @@ part-way still shows its rate.
     python benchmarks/pipeline_speed.py --survey 10 10000000 survey/          # 100M in 10 files
     python benchmarks/pipeline_speed.py --one survey 2 500000 0.5 > w100m.json
 
-``--one`` writes ``out_WORKERS.laz`` beside its input: for a file inside a survey folder that
-is inside the folder, where a later run on the folder would read it as one more tile.
+``--one`` writes its output into a temporary directory (under ``TMPDIR``) and deletes it at
+the end: it used to write ``out_WORKERS.laz`` beside its input, inside the survey folder for
+one of the survey's files, where a later run on the folder read it as one more tile.
 """
 
 import json
@@ -85,11 +86,12 @@ def one(path, workers, tile_points, floor):
     from tiledsimplify.pipeline import run
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(message)s")
-    out = Path(path).with_name(f"out_{workers}.laz")
-    t = time.perf_counter()
-    threading.Thread(target=_watch_memory, args=(t,), daemon=True).start()
-    s = run(path, out, ratio=0.2, workers=workers, tile_points=tile_points, floor=floor)
-    wall = time.perf_counter() - t
+    with tempfile.TemporaryDirectory(prefix="pipeline_speed-") as tmp:
+        t = time.perf_counter()
+        threading.Thread(target=_watch_memory, args=(t,), daemon=True).start()
+        s = run(path, Path(tmp) / f"out_{workers}.laz", ratio=0.2, workers=workers,
+                tile_points=tile_points, floor=floor)
+        wall = time.perf_counter() - t
     ru = resource.getrusage(resource.RUSAGE_SELF)
     return {"n": s.n_input, "workers": workers, "wall": wall, "tiles": s.n_tiles,
             "deeper": s.n_deeper, "seconds": s.seconds, "reached": s.reached,
