@@ -257,9 +257,9 @@ def test_a_stopped_run_cleans_up_says_how_to_go_on_and_resumes(tmp_path, name, r
     tmp.mkdir()
     # the command line as `tiledsimplify` runs it, with Ctrl-C's handler even where this
     # process was started with SIGINT ignored (a shell's background job)
-    cmd = [sys.executable, "-c", "import signal, sys; signal.signal(signal.SIGINT, "
-           "signal.default_int_handler); from tiledsimplify.cli import main; "
-           "sys.exit(main(sys.argv[1:]))", "run", str(path), str(out), "--ratio", "0.2",
+    script = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+              "from tiledsimplify.cli import main; sys.exit(main(sys.argv[1:]))")
+    cmd = [sys.executable, "-c", script, "run", str(path), str(out), "--ratio", "0.2",
            "--tile-points", "8000", "--workers", "1", "--summary", str(summary),
            "--no-progress"] + (["--store", str(store)] if resumable else [])
     sig = getattr(signal, name)

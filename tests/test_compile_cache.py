@@ -99,3 +99,38 @@ def test_worker_usage(argv):
     done = subprocess.run([sys.executable, "-m", "tiledsimplify.core.compile_cache", *argv],
                           capture_output=True, text=True)
     assert done.returncode != 0 and "usage" in done.stderr
+
+
+def test_a_compile_ahead_holds_a_lock_that_tile_tasks_wait_on(tmp_path, monkeypatch):
+    """start() takes the machine's compile lock before it returns and drops it when done;
+    wait() blocks while any process (here another open file of this one) holds it; a second
+    start() while one compiles does not block and starts nothing."""
+    import fcntl
+    import threading
+    monkeypatch.setattr(compile_cache, "cache_dir", lambda: str(tmp_path))
+    lock = tmp_path / compile_cache.LOCK_NAME
+    other = open(lock, "a+")  # noqa: SIM115 - held across the checks below
+    fcntl.flock(other, fcntl.LOCK_EX)  # a compile elsewhere on this machine
+    waiter = threading.Thread(target=compile_cache.wait)
+    waiter.start()
+    waiter.join(0.5)
+    assert waiter.is_alive()  # waits for it
+    monkeypatch.setattr(compile_cache, "missing", lambda *a: ["a kernel"])
+    assert compile_cache.start(2) is None  # someone compiles already: nothing to start
+    fcntl.flock(other, fcntl.LOCK_UN)
+    other.close()
+    waiter.join(10)
+    assert not waiter.is_alive()
+    # our own compile: the lock is held from start() until compile_all returns
+    release = threading.Event()
+    monkeypatch.setattr(compile_cache, "compile_all", lambda jobs: release.wait(10))
+    thread = compile_cache.start(2)
+    assert thread is not None
+    probe = open(lock, "a+")  # noqa: SIM115
+    with pytest.raises(BlockingIOError):
+        fcntl.flock(probe, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    release.set()
+    thread.join(10)
+    fcntl.flock(probe, fcntl.LOCK_SH | fcntl.LOCK_NB)  # free again
+    probe.close()
+    compile_cache.wait()  # at once when nobody compiles

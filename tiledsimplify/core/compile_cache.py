@@ -168,18 +168,61 @@ def compile_all(jobs=None, path=SIGNATURES, timeout=900.0):
             "failed": failed}
 
 
+#: a file in the cache directory that :func:`start` holds locked while it compiles, so that
+#: other processes of the machine (cluster workers) wait in :func:`wait` and then load the
+#: kernels instead of each compiling them all on its first tile
+LOCK_NAME = ".compiling.lock"
+
+
+def _lock_file():
+    try:
+        import fcntl  # noqa: F401 - POSIX only
+        path = Path(cache_dir()) / LOCK_NAME
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return open(path, "a+")
+    except (ImportError, OSError):  # no POSIX locks or no writable cache: nobody waits
+        return None
+
+
 def start(jobs):
     """:func:`compile_all` in a background thread if the cache lacks a kernel and ``jobs`` is
     at least 2 (one process compiles no faster than the caller would on first use): the
-    caller reads its input meanwhile and joins the thread before its first kernel. Returns the
-    thread, or None when there is nothing to do."""
+    caller reads its input meanwhile and joins the thread before its first kernel; other
+    processes of the machine wait for it in :func:`wait`. Returns the thread, or None when
+    there is nothing to do."""
     import threading
     if int(jobs) < 2 or not missing():
         return None
-    thread = threading.Thread(target=compile_all, args=(int(jobs),),
-                              name="tiledsimplify-compile", daemon=True)
+    fh = _lock_file()
+    if fh is not None:  # taken before returning, so no tile task of this machine runs unwarned
+        import fcntl
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # another process of the machine is compiling them: wait() waits
+            fh.close()
+            return None
+
+    def work():
+        try:
+            compile_all(int(jobs))
+        finally:
+            if fh is not None:
+                fh.close()  # releases the lock
+
+    thread = threading.Thread(target=work, name="tiledsimplify-compile", daemon=True)
     thread.start()
     return thread
+
+
+def wait():
+    """Return once no process of this machine is compiling the kernels ahead (:func:`start`
+    holds its lock); at once when none is. Tile tasks call it before their first kernel."""
+    fh = _lock_file()
+    if fh is None:
+        return
+    import fcntl
+    with fh:
+        fcntl.flock(fh, fcntl.LOCK_SH)
 
 
 def _compile(path, kernels):

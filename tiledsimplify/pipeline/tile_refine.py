@@ -48,6 +48,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..core import compile_cache
 from ..core.heap import coordinate_hash
 from ..core.refine import refine_coverage
 from ..tiles import IncompleteStoreError, TileStore
@@ -108,6 +109,7 @@ def cut_hausdorff(store_path, tile):
     """The largest distance from a core point of ``tile`` to the cut's kept points (of its
     core and halo; inf if none is kept). Returns ``{"tile", "hausdorff", "seconds"}``."""
     t0 = time.perf_counter()
+    compile_cache.wait()  # a compile ahead running on this machine
     store = TileStore.open(store_path)
     cut, _ = _cut(store)
     xyz, keep, n_core = _view(store, tile, cut)
@@ -149,6 +151,7 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), after=()):
     that a resumed run keeps exactly the tiles refined for the same cut.
     """
     t0 = time.perf_counter()
+    compile_cache.wait()  # a compile ahead running on this machine
     store = TileStore.open(store_path)
     cut, key = _cut(store)
     xyz, keep, n_core = _view(store, tile, cut, earlier)

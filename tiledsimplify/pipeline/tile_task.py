@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from ..core import SimplifyOptions, simplify_points
+from ..core import SimplifyOptions, compile_cache, simplify_points
 from ..core.refine import protected
 from ..core.simplify import Neighbourhoods, neighbourhood_state
 from ..errors import BudgetWarning, InputError
@@ -78,6 +78,7 @@ def deviation_histogram(store_path, tile, options):
     Returns ``{"tile", "hist", "n_points", "n_core", "seconds"}`` (``n_points``: core + halo).
     """
     t0 = time.perf_counter()
+    compile_cache.wait()  # a compile ahead running on this machine
     store = TileStore.open(store_path)
     xyz, frozen, n_core = _tile_cloud(store, tile)
     hist = np.zeros(len(BINS) - 1, dtype=np.int64)
@@ -157,6 +158,7 @@ def simplify_tile(store_path, tile, options, threshold, depth):
     sequence is known.
     """
     t0 = time.perf_counter()
+    compile_cache.wait()  # a compile ahead running on this machine
     store = TileStore.open(store_path)
     xyz, frozen, n_core = _tile_cloud(store, tile)
     step = np.full(n_core, -1, dtype=np.int64)

@@ -63,8 +63,41 @@ def probe(directory: str, token: str) -> dict:
             mine.unlink()
         except OSError as exc:
             write_error = f"{type(exc).__name__}: {exc.strerror or exc}"
+    from ..core import compile_cache
     return {"host": socket.gethostname(), "sees": sees, "write_error": write_error,
-            "version": __version__, "code": code_id()}
+            "version": __version__, "code": code_id(), "cpus": os.cpu_count() or 1,
+            "cache": str(compile_cache.cache_dir()), "cold": bool(compile_cache.missing())}
+
+
+def warm(jobs: int) -> bool:
+    """Run on one worker of a machine: compile the kernels into its cache ahead, in ``jobs``
+    processes, in the background (:func:`..core.compile_cache.start`); the machine's tile
+    tasks wait for it (:func:`..core.compile_cache.wait`). True if it started."""
+    from ..core import compile_cache
+    return compile_cache.start(jobs) is not None
+
+
+def _warm_cold_machines(client, replies: dict) -> None:
+    """Start compiling the kernels on every machine (host and cache directory) whose workers
+    lack them, once a machine, with as many processes as its workers have threads (at most
+    its cores), while this client reads the input. Without it each worker compiled every
+    kernel itself on its first tile: a cold ``LocalCluster`` of two one-thread workers ran the
+    Bunny in 55 s against 2.4 s warm (README, "Compile ahead")."""
+    info = client.scheduler_info().get("workers", {})
+    machines: dict = {}
+    for worker, got in sorted(replies.items()):
+        if got.get("cold"):
+            machines.setdefault((got["host"], got["cache"]), []).append(worker)
+    started = []
+    for (host, _), workers in sorted(machines.items()):
+        threads = sum(max(int(info.get(w, {}).get("nthreads") or 1), 1) for w in workers)
+        jobs = min(threads, replies[workers[0]]["cpus"])
+        if client.run(warm, jobs, workers=workers[:1], on_error="return").get(workers[0]) \
+                is True:
+            started.append(f"{host} ({jobs} processes)")
+    if started:
+        log.info("compiling the kernels ahead on %s while the input is read; its workers wait "
+                 "for it instead of each compiling on its first tile", ", ".join(started))
 
 
 def _wait_for_workers(client, address):
@@ -182,4 +215,5 @@ def check_workers(client, directory, *, temporary: bool, tile_points: int | None
             "by other code would not fit together.")
     if tile_points:
         _memory_warning(client.scheduler_info().get("workers", {}), tile_points)
+    _warm_cold_machines(client, replies)
     return n
