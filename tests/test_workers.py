@@ -215,9 +215,10 @@ def test_a_tile_that_kills_its_workers_is_named_with_the_likely_cause(small_work
     R = importlib.import_module("tiledsimplify.pipeline.run")
     # a tile task's key ends with its tile and the run's token (run._tile_tasks)
     task = dask.delayed(os._exit, pure=False)(1, dask_key_name="simplify-tile-0000003-7-f00d")
-    with pytest.raises(TiledSimplifyError, match=r"^tile 7 \(tiles\): every dask worker that ran "
-                                                 r"it died \(1, the last tcp://.*\), most likely "
-                                                 r"out of memory.*--memory-limit.*--tile-points"):
+    with pytest.raises(TiledSimplifyError, match=r"^tile 7 \(tiles\): the 1 dask worker\(s\) "
+                                                 r"that ran it all died \(the last tcp://.*\), "
+                                                 r"most likely out of memory.*--memory-limit.*"
+                                                 r"--tile-points"):
         R._compute([task], None, None, small_worker, False, "tiles")
 
 

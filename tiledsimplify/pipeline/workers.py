@@ -125,8 +125,8 @@ def killed_message(exc, stage: str) -> str:
     parts = str(exc.task).split("-")
     tile = parts[-2] if len(parts) >= 3 and parts[-2].isdigit() else str(exc.task)
     worker = getattr(exc.last_worker, "address", exc.last_worker)
-    return (f"tile {tile} ({stage}): every dask worker that ran it died ({exc.allowed_failures + 1}, "
-            f"the last {worker}), most likely out of memory: a tile needs about "
+    return (f"tile {tile} ({stage}): the {exc.allowed_failures + 1} dask worker(s) that ran it "
+            f"all died (the last {worker}), most likely out of memory: a tile needs about "
             f"{WORKER_BYTES_PER_POINT:,} bytes a point besides the worker's own "
             f"~{WORKER_BASE_MB} MB. Give the workers more memory (`dask worker --memory-limit`) or "
             "a smaller --tile-points; with --store, the same command goes on from the finished "
