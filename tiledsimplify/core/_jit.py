@@ -17,18 +17,27 @@ from pathlib import Path
 import numba
 
 
-def _cache_dir():
-    here = Path(__file__).resolve().parent
+def sources_digest(root, pattern="*.py"):
+    """sha256 (hex) of numba's version and of every file under ``root`` matching ``pattern``
+    (``**/*.py`` for subfolders too): each one's path relative to ``root``, then its bytes.
+    Names this package's kernel cache and, over the whole package, the code a cluster worker
+    runs (:func:`tiledsimplify.pipeline.workers.code_id`)."""
+    root = Path(root)
     digest = hashlib.sha256(numba.__version__.encode())
-    for path in sorted(here.glob("*.py")):
-        digest.update(path.name.encode())
+    for path in sorted(root.glob(pattern)):
+        digest.update(str(path.relative_to(root)).encode())
         digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _cache_dir():
+    digest = sources_digest(Path(__file__).resolve().parent)
     base = os.environ.get("NUMBA_CACHE_DIR")
     if base:
         root = Path(base)
     else:
         root = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "tiledsimplify"
-    return root / f"kernels-{digest.hexdigest()[:16]}"
+    return root / f"kernels-{digest[:16]}"
 
 
 def _set_cache_dir():

@@ -106,16 +106,6 @@ def _is_empty_dir(path):
     return path.is_dir() and not any(path.iterdir())
 
 
-def _store_fingerprint(path):
-    """The input and settings fingerprint a tile store was made for (read from its root's
-    metadata, which an interrupted ingest writes first), or None."""
-    try:
-        meta = json.loads((Path(path) / "zarr.json").read_text())
-        return meta["attributes"]["config"]["fingerprint"]
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-
-
 def _fingerprint(source, settings):
     h = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
     for f in getattr(source, "files", []):
@@ -546,7 +536,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             try:
                 ts = TileStore.open(store_path)
             except IncompleteStoreError:  # its ingest was stopped: no tile was done yet
-                if _store_fingerprint(store_path) != fp:
+                if (TileStore.stored_attributes(store_path).get("config") or {}) \
+                        .get("fingerprint") != fp:
                     raise other from None
                 log.info("%s: its ingest was interrupted; ingesting again", store_path)
                 again = True

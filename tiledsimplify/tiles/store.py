@@ -605,20 +605,24 @@ class TileStore:
         return cls.open(path)
 
     @staticmethod
-    def _prepare_path(path: Path, overwrite: bool):
+    def stored_attributes(path) -> dict:
+        """The root attributes saved at ``path`` (``format``, ``config``, ``complete``, …),
+        read without opening the store, so also those of one whose ingest was interrupted
+        (they are written first); ``{}`` if there are none to read."""
+        try:
+            meta = json.loads((Path(path) / "zarr.json").read_text())
+        except (OSError, ValueError):
+            return {}
+        attrs = meta.get("attributes") if isinstance(meta, dict) else None
+        return attrs if isinstance(attrs, dict) else {}
+
+    @classmethod
+    def _prepare_path(cls, path: Path, overwrite: bool):
         if path.exists() and not path.is_dir():
             raise StoreExistsError(f"{path} exists and is not a directory; choose a fresh "
                                    "store path")
         if path.is_dir() and any(path.iterdir()):
-            is_store = False
-            meta = path / "zarr.json"
-            if meta.is_file():
-                try:
-                    is_store = json.loads(meta.read_text()).get("attributes", {}) \
-                        .get("format") == FORMAT
-                except (OSError, ValueError):
-                    is_store = False
-            if not is_store:
+            if cls.stored_attributes(path).get("format") != FORMAT:
                 raise StoreExistsError(f"{path} is not empty and is not a tile store; refusing "
                                        "to write there. Choose a fresh store path.")
             if not overwrite:
