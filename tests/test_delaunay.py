@@ -132,3 +132,18 @@ def test_quadratic_worst_case_grows_every_buffer():
     got = {tuple(e) for e in voronoi._simplex_edges(T).tolist()}
     assert got <= naive.delaunay_edges(X)
     assert len([e for e in got if (e[0] < m) != (e[1] < m)]) > 0.85 * m * m
+
+
+def test_restarting_a_point_for_room_builds_the_same_triangulation():
+    """Full arrays stop :func:`delaunay._insert` before the point that needs room and it
+    starts that point again after they grow: with 8 tetrahedron slots and cavity buffers of 2
+    (dozens of stops) the tetrahedra come out exactly as with room enough from the start."""
+    X = _cloud("sphere", np.random.default_rng(2))
+    n = len(X)
+    C = np.concatenate([X, 50.0 * np.array([[1.0, 1, 1], [1, -1, -1], [-1, 1, -1],
+                                            [-1, -1, 1]])])
+    order = delaunay.brio_order(X).astype(np.int64)
+    roomy, ok0 = delaunay._build(C, order, n, 8 * n + 64, 256)
+    tight, ok1 = delaunay._build(C, order, n, 8, 2)
+    assert ok0 and ok1
+    assert np.array_equal(roomy, tight)
