@@ -107,9 +107,11 @@ def _remove_sequence(X, victims, reach=np.inf):
     mark = np.full(len(X), -1, np.int64)
     for p in victims:
         former = pool[start[p]:start[p] + cnt[p]].copy()
-        k, pool = voronoi.remove_point(X, p, start, cnt, cap, pool, meta,
-                                       voronoi.BOX_FACTOR * D, voronoi.TOL_FACTOR * D,
-                                       reach, link, cand, bufs, lbufs, frame, mark)
+        pool = adjacency.with_room(pool, meta, voronoi.removal_room(start, cnt, pool, p))
+        k = voronoi.remove_point(X, p, start, cnt, cap, pool, meta, voronoi.BOX_FACTOR * D,
+                                 voronoi.TOL_FACTOR * D, reach, link, cand, bufs, lbufs, frame,
+                                 mark)
+        assert k == len(former)
         # link[:k]: the former neighbours, nearest to p first (ties by index)
         d2 = ((X[link[:k]] - X[p]) ** 2).sum(axis=1)
         assert sorted(link[:k].tolist()) == sorted(former.tolist())
@@ -165,7 +167,8 @@ def test_facet_witness_accepts_only_positive_facets(kind, reach):
         cand = pool[start[a]:start[a] + cnt[a]]
         for b in cand[cand > a]:
             if voronoi.facet_positive(X, a, b, cand, cnt[a], half, tol, reach, bufs[0],
-                                      bufs[1], lbufs[0], bufs[2], bufs[3], lbufs[1], frame, -1):
+                                      bufs[1], lbufs[0], bufs[2], bufs[3], lbufs[1], frame[0],
+                                      frame[1], -1):
                 clipped.add((a, int(b)))
             if voronoi.facet_witness(X, a, b, cand, cnt[a], half, tol, reach):
                 witnessed.add((a, int(b)))
@@ -204,13 +207,14 @@ def test_polygon_witness_changes_no_answer(kind, reach, monkeypatch):
             for b in link[link > a][:3]:
                 args += [(int(a), int(b), cons, int(p)), (int(a), int(b), cons, -1)]
     fast = [voronoi.facet_positive(X, a, b, c, len(c), half, tol, reach, bufs[0], bufs[1],
-                                   lbufs[0], bufs[2], bufs[3], lbufs[1], frame, i)
+                                   lbufs[0], bufs[2], bufs[3], lbufs[1], frame[0], frame[1],
+                                   i)
             for a, b, c, i in args]
 
     def py_run():
         return [voronoi.facet_positive.py_func(X, a, b, c, len(c), half, tol, reach, bufs[0],
                                                bufs[1], lbufs[0], bufs[2], bufs[3], lbufs[1],
-                                               frame, i)
+                                               frame[0], frame[1], i)
                 for a, b, c, i in args]
 
     # the shortcut does the work it is there for: some tries prove a facet early

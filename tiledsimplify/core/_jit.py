@@ -68,3 +68,12 @@ jit = numba.njit(cache=True, nogil=True, error_model=ERROR_MODEL)
 #: removal stage (paired runs); the heap and the plane-fit helpers showed no gain and stay
 #: plain calls, as every inlined copy adds compile time to the first run on a machine.
 jit_inline = numba.njit(cache=True, nogil=True, inline="always", error_model=ERROR_MODEL)
+
+#: for helpers called inside the kernels' loops that never allocate an array: compiled without
+#: numba's reference counting (``_nrt=False``). Their arrays are always the caller's, alive for
+#: the whole call, yet numba counted each array argument of a call or of an inlined copy with
+#: an atomic increment and decrement (the caller's loop kept them apart, out of reach of its
+#: pruning): 25-35 % of every stage's time in the kernels (perf samples on 100k scan points,
+#: 2026-12-03, docs/measurements.md "Reference counts"). A leaf may call other leaves, and
+#: may make views (``a[i]``, ``a[s:e]``), but not new arrays.
+jit_leaf = numba.njit(cache=True, nogil=True, error_model=ERROR_MODEL, _nrt=False)

@@ -10,7 +10,7 @@ nearest first in place, so lists stay (almost) sorted and its sort has little le
 
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_leaf
 
 
 @jit
@@ -120,7 +120,7 @@ def to_sets(start, cnt, pool, alive=None):
     return out
 
 
-@jit_inline
+@jit_leaf
 def contains(start, cnt, pool, i, j):
     """True if ``j`` is in the list of ``i``."""
     s = start[i]
@@ -130,7 +130,7 @@ def contains(start, cnt, pool, i, j):
     return False
 
 
-@jit_inline
+@jit_leaf
 def remove(start, cnt, pool, i, j):
     """Remove ``j`` from the list of ``i``, the later entries moving up one (the order stays).
     True if it was there."""
@@ -148,14 +148,23 @@ def remove(start, cnt, pool, i, j):
 @jit
 def append(start, cnt, cap, pool, meta, i, j):
     """Append ``j`` to the list of ``i``; returns the pool (a new array if it had to grow)."""
+    if cnt[i] == cap[i] and meta[0] + max(2 * cap[i], 8) > pool.size:
+        pool = with_room(pool, meta, max(2 * cap[i], 8))
+    append_in_place(start, cnt, cap, pool, meta, i, j)
+    return pool
+
+
+@jit_leaf
+def append_in_place(start, cnt, cap, pool, meta, i, j):
+    """Append ``j`` to the list of ``i`` within the pool as it is (a full list moves to the
+    end of the used part, at twice its capacity). False, and nothing changed, if the pool
+    has no room for that: see :func:`with_room`."""
     c = cnt[i]
     if c == cap[i]:
         newcap = max(2 * cap[i], 8)
         used = meta[0]
         if used + newcap > pool.size:
-            bigger = np.full(max(2 * pool.size, used + newcap), -1, dtype=pool.dtype)
-            bigger[:used] = pool[:used]
-            pool = bigger
+            return False
         s_old = start[i]
         for k in range(c):
             pool[used + k] = pool[s_old + k]
@@ -164,4 +173,16 @@ def append(start, cnt, cap, pool, meta, i, j):
         meta[0] = used + newcap
     pool[start[i] + c] = j
     cnt[i] = c + 1
-    return pool
+    return True
+
+
+@jit
+def with_room(pool, meta, room):
+    """The pool, or a copy at least twice as large, with ``room`` free slots past its used
+    part (``meta[0]``)."""
+    used = meta[0]
+    if used + room <= pool.size:
+        return pool
+    bigger = np.full(max(2 * pool.size, used + room), -1, dtype=pool.dtype)
+    bigger[:used] = pool[:used]
+    return bigger

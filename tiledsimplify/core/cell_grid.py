@@ -19,7 +19,7 @@ round for the ~1 % of points with a tie.
 
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_leaf
 
 #: a point within (1 - COVER) h of another, in every coordinate, is at most one cell away
 #: (rounding of the cell index is far below this for up to MAX_CELLS cells per axis)
@@ -159,7 +159,7 @@ def bucket(cell, items, n_cells):
                    np.ascontiguousarray(items, dtype=np.int64), n_cells)
 
 
-@jit_inline
+@jit_leaf
 def sq_dist(xyz, i, q):
     """Squared distance from row ``i`` of ``xyz`` to ``q``, rounded as cKDTree rounds it."""
     d0 = xyz[i, 0] - q[0]
@@ -168,16 +168,10 @@ def sq_dist(xyz, i, q):
     return d0 * d0 + d1 * d1 + d2 * d2
 
 
-@jit
+@jit_leaf
 def _gather(cell, near_start, near, start, slot, xyz, buf_xyz, buf_id):
-    """Copy the members of the cells around ``cell`` into ``buf_xyz`` / ``buf_id`` (grown if
-    too small); returns the buffers and the count."""
-    cnt = 0
-    for u in range(near_start[cell], near_start[cell + 1]):
-        cnt += start[near[u] + 1] - start[near[u]]
-    if cnt > buf_id.size:
-        buf_xyz = np.empty((2 * cnt, 3))
-        buf_id = np.empty(2 * cnt, dtype=np.int64)
+    """Copy the members of the cells around ``cell`` into ``buf_xyz`` / ``buf_id`` (room
+    enough: :func:`_most_around`); returns the count."""
     cnt = 0
     for u in range(near_start[cell], near_start[cell + 1]):
         v = near[u]
@@ -187,10 +181,25 @@ def _gather(cell, near_start, near, start, slot, xyz, buf_xyz, buf_id):
             buf_xyz[cnt, 2] = xyz[i, 2]
             buf_id[cnt] = slot[i]
             cnt += 1
-    return buf_xyz, buf_id, cnt
+    return cnt
 
 
-@jit_inline
+@jit_leaf
+def _most_around(q_cell, near_start, near, start):
+    """The most members the cells around any of ``q_cell`` hold together."""
+    most = 0
+    for t in range(q_cell.size):
+        if t > 0 and q_cell[t] == q_cell[t - 1]:
+            continue
+        cell = q_cell[t]
+        cnt = 0
+        for u in range(near_start[cell], near_start[cell + 1]):
+            cnt += start[near[u] + 1] - start[near[u]]
+        most = max(most, cnt)
+    return most
+
+
+@jit_leaf
 def _before(s, c, s2, c2, tie):
     """Whether member ``c`` at squared distance ``s`` comes before ``c2`` at ``s2``: nearer,
     or as near with the smaller ``tie``, or the same tie too and the smaller position."""
@@ -242,24 +251,26 @@ def nearest(Q, q_cell, near_start, near, start, slot, xyz, reach2, k, bound, tie
     l_dist = np.empty(nq * k)
     amb = np.zeros(nq, dtype=np.bool_)
     all_amb = not b2 < reach2
-    buf_xyz = np.empty((64, 3))
-    buf_id = np.empty(64, dtype=np.int64)
-    sq = np.empty(64)
-    near_ones = np.empty(64, dtype=np.int64)
+    # buffers made once, large enough for every query (an array replaced inside the loop
+    # would be counted, atomically, at each use)
+    most = max(_most_around(q_cell, near_start, near, start), 1)
+    buf_xyz = np.empty((most, 3))
+    buf_id = np.empty(most, dtype=np.int64)
+    sq = np.empty(most)
+    near_ones = np.empty(most, dtype=np.int64)
     cnt = 0
     bs = np.empty(max(k, 1))
     bi = np.empty(max(k, 1), dtype=np.int64)
     for t in range(nq):
         if t == 0 or q_cell[t] != q_cell[t - 1]:
-            buf_xyz, buf_id, cnt = _gather(q_cell[t], near_start, near, start, slot, xyz,
-                                           buf_xyz, buf_id)
-            if sq.size < buf_id.size:
-                sq = np.empty(buf_id.size)
-                near_ones = np.empty(buf_id.size, dtype=np.int64)
-        q = Q[t]
+            cnt = _gather(q_cell[t], near_start, near, start, slot, xyz, buf_xyz, buf_id)
+        q0, q1, q2 = Q[t, 0], Q[t, 1], Q[t, 2]
         m = 0
         for i in range(cnt):  # branch-free: every distance, and which are within the bound
-            s = sq_dist(buf_xyz, i, q)
+            e0 = buf_xyz[i, 0] - q0  # as sq_dist rounds it
+            e1 = buf_xyz[i, 1] - q1
+            e2 = buf_xyz[i, 2] - q2
+            s = e0 * e0 + e1 * e1 + e2 * e2
             sq[i] = s
             near_ones[m] = i
             m += s < b2

@@ -13,10 +13,10 @@ polygons and one half-plane at a time.
 
 import math
 
-from ._jit import jit_inline
+from ._jit import jit_leaf
 
 
-@jit_inline
+@jit_leaf
 def square(half, xs, ys, labels):
     """Write the square ``[-half, half]^2`` (counter-clockwise, edges labelled -1); return 4."""
     xs[0], ys[0] = -half, -half
@@ -28,7 +28,7 @@ def square(half, xs, ys, labels):
     return 4
 
 
-@jit_inline
+@jit_leaf
 def clip(n, xs, ys, labels, gx, gy, h, label, ox, oy, olabels):
     """Clip the convex polygon ``(xs, ys)[:n]`` to ``gx*x + gy*y <= h``.
 
@@ -78,7 +78,7 @@ def clip(n, xs, ys, labels, gx, gy, h, label, ox, oy, olabels):
     return m
 
 
-@jit_inline
+@jit_leaf
 def area(n, xs, ys):
     """Signed area of the polygon ``(xs, ys)[:n]`` (positive when counter-clockwise)."""
     s = 0.0
@@ -88,7 +88,7 @@ def area(n, xs, ys):
     return 0.5 * s
 
 
-@jit_inline
+@jit_leaf
 def origin_distance2(n, xs, ys):
     """Squared distance from the origin to the convex counter-clockwise polygon
     ``(xs, ys)[:n]`` (0 if the origin lies inside or on it)."""

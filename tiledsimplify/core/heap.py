@@ -9,7 +9,7 @@ id (ids sorted by coordinate) sweeps each face empty from one side.
 
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_inline, jit_leaf
 
 
 @jit_inline
@@ -21,7 +21,7 @@ def _less(ka, ta, a, kb, tb, b):
     return a < b
 
 
-@jit
+@jit_leaf
 def _sift_up(heap, pos, hkey, htie, k):
     item, ki, ti = heap[k], hkey[k], htie[k]
     while k > 0:
@@ -37,7 +37,7 @@ def _sift_up(heap, pos, hkey, htie, k):
     pos[item] = k
 
 
-@jit
+@jit_leaf
 def _sift_down(heap, pos, hkey, htie, k, size):
     item, ki, ti = heap[k], hkey[k], htie[k]
     while True:
@@ -59,7 +59,7 @@ def _sift_down(heap, pos, hkey, htie, k, size):
     pos[item] = k
 
 
-@jit
+@jit_leaf
 def build(heap, pos, key, tie, items):
     """Heapify ``items`` (point ids) with priorities ``key[items]``; returns the heap size."""
     hp, hkey, htie = heap
@@ -74,7 +74,7 @@ def build(heap, pos, key, tie, items):
     return size
 
 
-@jit
+@jit_leaf
 def update(heap, pos, key, tie, i, value, size):
     """Set ``key[i] = value`` and restore the heap order (``i`` must be in the heap)."""
     hp, hkey, htie = heap
@@ -88,7 +88,7 @@ def update(heap, pos, key, tie, i, value, size):
         _sift_down(hp, pos, hkey, htie, k, size)
 
 
-@jit
+@jit_leaf
 def pop(heap, pos, key, tie, size):
     """Remove and return the id with the smallest key; the new size is ``size - 1``."""
     hp, hkey, htie = heap
@@ -102,7 +102,7 @@ def pop(heap, pos, key, tie, size):
     return top
 
 
-@jit
+@jit_leaf
 def top(heap):
     """The id with the smallest key (the heap must not be empty)."""
     return heap[0][0]

@@ -33,7 +33,7 @@ neighbours but not their local meshes or normals: the removal loop does not upda
 
 import math
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_leaf
 
 #: name -> code of the importance measures the removal kernel knows
 MEASURES = {"paper": 0, "coverage": 1}
@@ -52,7 +52,7 @@ def coverage_weight(spacing, strength):
     return float(strength) / (LENGTH_SPACINGS * float(spacing))
 
 
-@jit_inline
+@jit_leaf
 def eq1(X, normals, boundary, p, dn, c):
     """Eq. (1) for point ``p`` with local-mesh neighbours ``dn[:c]``."""
     total = 0.0
@@ -71,7 +71,7 @@ def eq1(X, normals, boundary, p, dn, c):
     return total / k
 
 
-@jit_inline
+@jit_leaf
 def spread2(X, p, dn, c):
     """``ρ(p)²``: mean squared distance from ``p`` to ``dn[:c]`` (0 if ``c == 0``)."""
     if c == 0:
@@ -84,7 +84,7 @@ def spread2(X, p, dn, c):
     return total / c
 
 
-@jit_inline
+@jit_leaf
 def importance_of(code, X, normals, boundary, p, dn, c, weight):
     """Dispatch to the measure with the given code (see :data:`MEASURES`).
 

@@ -36,7 +36,7 @@ import math
 
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_inline, jit_leaf
 from .clip import clip, square
 from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covariance,
                      smallest_axis, smallest_axis_given, sym3_eigvals, tangent_basis)
@@ -59,7 +59,7 @@ MAX_DN = 32
 _SIN_ELEV = math.sin(math.radians(MAX_ELEVATION))
 
 
-@jit
+@jit_leaf
 def sort_by_distance(X, p, nbr, m, idx, d2):
     """Fill ``idx[:m], d2[:m]`` with the points ``nbr[:m]`` and their squared distances to
     ``p``, nearest first, ties by index (insertion sort; the lists are short). ``idx`` may be
@@ -83,7 +83,7 @@ def sort_by_distance(X, p, nbr, m, idx, d2):
         idx[j] = q
 
 
-@jit
+@jit_leaf
 def _plane_size(X, p, idx, d2, m):
     """How many of the sorted neighbours ``idx[:m]`` the reference plane is fitted to.
 
@@ -141,7 +141,7 @@ def _ratio(l1, l2):
     return l1 / l2 if l2 > 0.0 else 0.0
 
 
-@jit
+@jit_leaf
 def local_mesh(X, p, nbr, m, out, fbufs, lbufs, normal0, frame, stable):
     """Select ``DN_p`` from the Voronoi neighbours ``nbr[:m]`` of ``p``; returns its size.
 
@@ -293,7 +293,7 @@ def all_local_meshes(X, start, cnt, pool, dn, dn_cnt, plane_normals, stable):
                                plane_normals[p], frame, stable[p:p + 1])
 
 
-@jit
+@jit_leaf
 def unchanged_without(X, p, nbr, m, q, k):
     """True if ``DN_p`` and its reference plane stay as they are when neighbour ``q`` leaves
     the list ``nbr[:m]`` (which no longer holds it, and gained nothing since ``DN_p`` was

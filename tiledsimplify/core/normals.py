@@ -8,12 +8,12 @@ neighbours ``DN_p``; where those are nearly collinear, the reference-plane norma
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_leaf
 from .linalg import covariance_about, orient_canonical, smallest_axis
 from .local_mesh import SPREAD
 
 
-@jit
+@jit_leaf
 def normal_at(X, p, dn, c, fallback, out, work):
     """PCA normal of ``p`` and ``dn[:c]``; ``fallback`` when they do not span a plane.
 

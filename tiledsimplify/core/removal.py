@@ -24,19 +24,19 @@ import math
 
 import numpy as np
 
-from . import heap
-from ._jit import jit
+from . import adjacency, heap
+from ._jit import jit, jit_leaf
 from .importance import importance_of
 from .local_mesh import MAX_DN, local_mesh, unchanged_without
 from .normals import normal_at
-from .voronoi import remove_point
+from .voronoi import removal_room, remove_point
 
 
 #: name -> code of the guard rules the removal loop knows
 GUARDS = {"none": 0, "max_spacing": 1}
 
 
-@jit
+@jit_leaf
 def guard_allows(guard, value, X, p, start, cnt, pool):
     """May ``p`` be removed now?
 
@@ -55,16 +55,6 @@ def guard_allows(guard, value, X, p, start, cnt, pool):
         if d < best:
             best = d
     return best <= value * value
-
-
-@jit
-def _max_count(cnt, items, k):
-    m = 0
-    for j in range(k):
-        c = cnt[items[j]]
-        if c > m:
-            m = c
-    return m
 
 
 @jit
@@ -120,8 +110,75 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     nvec = np.empty(3)
     wvec = np.empty(3)
     before = np.zeros(n, dtype=np.int64)  # list sizes before the current removal
-    step = 0
+    state = np.zeros(5, dtype=np.int64)
+    state[SIZE] = size
+    while True:
+        status = _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable,
+                      boundary, removable, importance, tie, code, weight, guard, guard_value,
+                      n_steps, half, tol, reach, update_normals, stop_above, hp, pos, order,
+                      at, stamp, mark, mesh_changed, normal_changed, before, link, cand, bufs,
+                      lbufs, frame, fbufs, mbufs, newdn, nvec, wvec, state)
+        if status == DONE:
+            break
+        if status == NO_ROOM:
+            raise RuntimeError("remove_points: the neighbour pool ran out of room that "
+                               "removal_room promised (a bug)")
+        k = state[NEED_LINK]  # room for the next removal: grow what is short, then go on
+        if k > link.size or k + 5 > bufs.shape[1]:
+            link = np.empty(2 * k, dtype=np.int64)
+            cand = np.empty(2 * k, dtype=np.int64)
+            bufs = np.empty((4, 2 * k + 5))
+            lbufs = np.empty((2, 2 * k + 5), dtype=np.int64)
+        m = state[NEED_MESH]
+        if m + 5 > fbufs.shape[1]:
+            fbufs = np.empty((5, 2 * m + 10))
+            mbufs = np.empty((3, 2 * m + 10), dtype=np.int64)
+        pool = adjacency.with_room(pool, meta, state[NEED_POOL])
+    step = state[STEP]
+    return order[:step], at[:step], pool
+
+
+#: :func:`_run`'s statuses: done; stopped before a removal that needs more room; the pool
+#: had less room than :func:`.voronoi.removal_room` said (a bug: the lists are half updated)
+DONE, GROW, NO_ROOM = 0, 1, 2
+#: slots of :func:`_run`'s ``state``: steps done, heap size, and the room the next removal
+#: needs: its Voronoi degree, the largest degree its former neighbours can reach, pool slots
+STEP, SIZE, NEED_LINK, NEED_MESH, NEED_POOL = range(5)
+
+
+@jit_leaf
+def _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable, boundary,
+         removable, importance, tie, code, weight, guard, guard_value, n_steps, half, tol, reach,
+         update_normals, stop_above, hp, pos, order, at, stamp, mark, mesh_changed,
+         normal_changed, before, link, cand, bufs, lbufs, frame, fbufs, mbufs, newdn, nvec, wvec,
+         state):
+    """The removal loop of :func:`remove_points`, from step ``state[STEP]``.
+
+    It replaces no array: before each removal it checks that the scratch buffers and the pool
+    have room for it and, if not, returns :data:`GROW` with the room needed in ``state``
+    before anything changes; the caller grows them and calls again. (Arrays replaced inside
+    the loop were counted with an atomic increment and decrement at every use.)
+    """
+    step = state[STEP]
+    size = state[SIZE]
+    plane = frame[:2]
     while step < n_steps and size > 0:
+        # -- room for the next removal, checked before anything changes
+        p = heap.top(hp)
+        k = cnt[p]
+        s = start[p]
+        most = 0
+        for j in range(k):
+            most = max(most, cnt[pool[s + j]] + k)  # at most k - 2 new entries each
+        room = removal_room(start, cnt, pool, p)
+        if (k > link.size or k + 5 > bufs.shape[1] or most + 5 > fbufs.shape[1]
+                or meta[0] + room > pool.size):
+            state[STEP] = step
+            state[SIZE] = size
+            state[NEED_LINK] = k
+            state[NEED_MESH] = most
+            state[NEED_POOL] = room
+            return GROW
         p = heap.pop(hp, pos, importance, tie, size)
         size -= 1
         removable[p] = False
@@ -130,22 +187,14 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
         order[step] = p
         at[step] = importance[p]
         # -- 1. Voronoi neighbourhoods
-        k = cnt[p]
-        if k > link.size:  # remove_point's buffers: the link is its constraints
-            link = np.empty(2 * k, dtype=np.int64)
-            cand = np.empty(2 * k, dtype=np.int64)
-            bufs = np.empty((4, 2 * k + 5))
-            lbufs = np.empty((2, 2 * k + 5), dtype=np.int64)
         for j in range(cnt[p]):
             q = pool[start[p] + j]
             before[q] = cnt[q]
-        k, pool = remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand,
-                               bufs, lbufs, frame, mark)
+        k = remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand, bufs,
+                         lbufs, frame, mark)
+        if k < 0:
+            return NO_ROOM
         # -- 2. local meshes and normals of the first ring
-        m = _max_count(cnt, link, k)
-        if m + 5 > fbufs.shape[1]:
-            fbufs = np.empty((5, 2 * m + 10))
-            mbufs = np.empty((3, 2 * m + 10), dtype=np.int64)
         for j in range(k):
             a = link[j]
             if boundary[a]:  # never removed, and Eq. (1) ignores its normal: nothing to do
@@ -162,7 +211,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
                     mesh_changed[a] = False
                     continue  # the same DN_a and reference plane, so the same normal
             c = local_mesh(X, a, pool[s:s + cnt[a]], cnt[a], newdn, fbufs, mbufs,
-                           nvec, frame[:2], stable[a:a + 1])
+                           nvec, plane, stable[a:a + 1])
             same = c == dn_cnt[a]
             if same:
                 for i in range(c):
@@ -219,4 +268,6 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
         step += 1
         if at[step - 1] > stop_above:
             break  # every later step has a running maximum above stop_above
-    return order[:step], at[:step], pool
+    state[STEP] = step
+    state[SIZE] = size
+    return DONE

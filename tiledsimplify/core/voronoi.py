@@ -59,7 +59,7 @@ import numpy as np
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from . import adjacency
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_leaf
 from .clip import area, clip, origin_distance2, square
 from .delaunay import delaunay_tets
 from .linalg import any_perpendicular
@@ -78,7 +78,7 @@ JITTER = 1e-10
 CENTROID_AFTER = 6
 
 
-@jit_inline
+@jit_leaf
 def _vertex_mean(n, xs, ys):
     """The mean of the vertices of the polygon ``(xs, ys)[:n]`` (inside it: it is convex)."""
     sx = 0.0
@@ -89,7 +89,7 @@ def _vertex_mean(n, xs, ys):
     return sx / n, sy / n
 
 
-@jit_inline
+@jit_leaf
 def _beyond_by(X, a, b, cand, lo, hi, cx, cy, cz, tol):
     """True if ``c`` (relative to ``a``) lies nearer to ``a`` than to every ``s`` of
     ``cand[lo:hi]`` (not ``a``, ``b``), by at least ``4 tol`` in distance to their bisector
@@ -107,7 +107,7 @@ def _beyond_by(X, a, b, cand, lo, hi, cx, cy, cz, tol):
     return True
 
 
-@jit_inline
+@jit_leaf
 def _deep_inside(X, a, b, cand, first, ncand, inside, cx, cy, cz, tol):
     """True if ``c`` (relative to ``a``) lies at least ``4 tol`` inside every constraint of
     :func:`facet_positive`: nearer to ``a`` than to each ``s`` of ``cand[:ncand]`` and nearer
@@ -124,8 +124,8 @@ def _deep_inside(X, a, b, cand, first, ncand, inside, cx, cy, cz, tol):
     return h >= 0.0 and h * h >= 64.0 * tol * tol * s2
 
 
-@jit_inline
-def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, lb, frame,
+@jit_leaf
+def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, lb, e1, e2,
                    inside):
     """True if points ``a`` and ``b`` share a Voronoi facet of positive area within ``reach``.
 
@@ -153,8 +153,9 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
     In the initial filter the polygon is still the whole reach disc after six cuts and the
     tries saved nothing: off there.
 
-    ``xa, ya, la, xb, yb, lb`` are scratch buffers of length at least ``ncand + 5``; ``frame``
-    is a (3, 3) scratch array.
+    ``xa, ya, la, xb, yb, lb`` are scratch buffers of length at least ``ncand + 5``; ``e1``
+    and ``e2`` of length 3 (the facet's frame). Callers make these views once, outside their
+    loops: numba counts every view made in a loop with an atomic increment and decrement.
     """
     ax, ay, az = X[a, 0], X[a, 1], X[a, 2]
     dx, dy, dz = X[b, 0] - ax, X[b, 1] - ay, X[b, 2] - az
@@ -170,8 +171,6 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
         if r < half:
             half = r  # the square around the disc
     u0, u1, u2 = dx / L, dy / L, dz / L
-    e1 = frame[0]
-    e2 = frame[1]
     any_perpendicular(u0, u1, u2, e1)
     e2[0] = u1 * e1[2] - u2 * e1[1]
     e2[1] = u2 * e1[0] - u0 * e1[2]
@@ -248,7 +247,7 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
 WITNESS_ROUNDS = 1
 
 
-@jit
+@jit_leaf
 def facet_witness(X, a, b, cand, ncand, half, tol, reach):
     """True if a point found without clipping proves the facet of ``a``, ``b`` positive.
 
@@ -324,7 +323,8 @@ def filter_candidates(X, start, cnt, pool, half, tol, reach):
     xb = np.empty(size)
     yb = np.empty(size)
     lb = np.empty(size, dtype=np.int64)
-    frame = np.empty((3, 3))
+    e1 = np.empty(3)
+    e2 = np.empty(3)
     total = 0
     for i in range(n):
         total += cnt[i]
@@ -339,7 +339,7 @@ def filter_candidates(X, start, cnt, pool, half, tol, reach):
                 continue
             if (facet_witness(X, a, b, cand, cnt[a], half, tol, reach)
                     or facet_positive(X, a, b, cand, cnt[a], half, tol, reach, xa, ya, la, xb,
-                                      yb, lb, frame, -1)):
+                                      yb, lb, e1, e2, -1)):
                 out[k, 0] = a
                 out[k, 1] = b
                 k += 1
@@ -539,7 +539,7 @@ def voronoi_neighbours(X, slack=8, scale=None, reach=math.inf):
     return adjacency.from_edges(n, kept, slack=slack), how
 
 
-@jit_inline
+@jit_leaf
 def _nearest_to_midpoint_first(X, a, b, cand, k):
     """Swap the point of ``cand[:k]`` (not ``a`` or ``b``) nearest to the midpoint of ``a`` and
     ``b`` into ``cand[0]``.
@@ -574,19 +574,38 @@ def _nearest_to_midpoint_first(X, a, b, cand, k):
         cand[0] = c
 
 
-@jit
+@jit_leaf
+def removal_room(start, cnt, pool, p):
+    """Free pool slots :func:`remove_point` may need to remove ``p``: each of the ``k`` former
+    neighbours gains at most ``k - 1`` entries, and a full list moves to a new place twice
+    its capacity (at least 8), so a list ending with ``c`` entries takes at most ``4 c +
+    16`` new slots in all."""
+    s = start[p]
+    k = cnt[p]
+    room = 0
+    for j in range(k):
+        room += 4 * (cnt[pool[s + j]] + k) + 16
+    return room
+
+
+@jit_leaf
 def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand, bufs, lbufs,
                  frame, mark):
     """Remove ``p`` from the Voronoi-neighbour lists and add the facets its removal opens.
 
     Paper §3.3: "by updating the Voronoi diagram of P" — done exactly and locally. After the
     call ``link[:k]`` holds the former neighbours of ``p``, nearest first (``k`` is
-    returned); the pool may have moved, so the (possibly new) pool is returned too:
-    ``(k, pool)``.
+    returned). The pool must have :func:`removal_room` free slots past its used part
+    (:func:`.adjacency.with_room`); the lists grow within it. Without them ``-1`` is
+    returned, with the lists left half updated.
 
     ``cand`` must have room for ``cnt[p]`` entries (the constraints: the link); ``bufs``
     (4, m) and ``lbufs`` (2, m) are clipping scratch with ``m >= cnt[p] + 5``. ``mark``
     (int64, one entry per point, all ``-1``) is scratch too; it is left all ``-1``.
+
+    A leaf (:data:`._jit.jit_leaf`): it never replaces the pool, so no array in its loops is
+    reference-counted (the pool replaced as it grew cost ~10 % of the removal loop in atomic
+    counts on it).
     """
     s = start[p]
     k = cnt[p]
@@ -607,7 +626,12 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
     # Most pairs have no facet: the link goes nearest to p first, and for each pair the link
     # point nearest to its midpoint is moved to the front (see _nearest_to_midpoint_first),
     # so the clipped polygon empties after a few constraints.
-    sort_by_distance(X, p, link, k, link, bufs[0])
+    # the scratch rows as views made once: a view made in the loop is counted (an atomic
+    # increment and decrement) at every facet test
+    xa, ya, xb, yb = bufs[0], bufs[1], bufs[2], bufs[3]
+    la, lb = lbufs[0], lbufs[1]
+    e1, e2 = frame[0], frame[1]
+    sort_by_distance(X, p, link, k, link, xa)
     for j in range(k):
         cand[j] = link[j]
     for ia in range(k):
@@ -625,12 +649,13 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
                 if dx * dx + dy * dy + dz * dz >= 4.0 * reach * reach:
                     continue
             _nearest_to_midpoint_first(X, a, b, cand, k)
-            if facet_positive(X, a, b, cand, k, half, tol, reach,
-                              bufs[0], bufs[1], lbufs[0], bufs[2], bufs[3], lbufs[1], frame, p):
-                pool = adjacency.append(start, cnt, cap, pool, meta, a, b)
-                pool = adjacency.append(start, cnt, cap, pool, meta, b, a)
+            if facet_positive(X, a, b, cand, k, half, tol, reach, xa, ya, la, xb, yb, lb, e1,
+                              e2, p):
+                if not (adjacency.append_in_place(start, cnt, cap, pool, meta, a, b)
+                        and adjacency.append_in_place(start, cnt, cap, pool, meta, b, a)):
+                    return -1
                 mark[b] = a
         sa = start[a]  # a's list as it is now (it may have moved as it grew)
         for j in range(cnt[a]):
             mark[pool[sa + j]] = -1
-    return k, pool
+    return k
