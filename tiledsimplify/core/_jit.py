@@ -62,11 +62,10 @@ ERROR_MODEL = "numpy"
 
 jit = numba.njit(cache=True, nogil=True, error_model=ERROR_MODEL)
 
-#: for small kernels called in the innermost loops: inlined into the caller at numba's IR level.
-#: A compiled call passes every array as a struct and counts its references: 35-50 ns for the
-#: facet test's 16 arguments. Inlining the facet test and the importance took 5-10 % off the
-#: removal stage (paired runs); the heap and the plane-fit helpers showed no gain and stay
-#: plain calls, as every inlined copy adds compile time to the first run on a machine.
+#: for small helpers inlined into the caller at numba's IR level. Each array argument of an
+#: inlined copy is counted like a new name (an atomic increment and decrement per call), so
+#: helpers with array arguments called in loops are leaves (:data:`jit_leaf`) instead; this
+#: stays for scalar helpers and for the Delaunay predicates, whose counts numba pairs up.
 jit_inline = numba.njit(cache=True, nogil=True, inline="always", error_model=ERROR_MODEL)
 
 #: for helpers called inside the kernels' loops that never allocate an array: compiled without
