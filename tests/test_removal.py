@@ -162,3 +162,40 @@ def test_greedy_order_equals_naive_from_scratch(kind, measure, reach, update):
                                       None if update else normals0)
     assert order.tolist() == ref_order
     np.testing.assert_array_equal(at, ref_at)
+
+
+
+def test_room_grown_between_removals_gives_the_same_sequence(monkeypatch):
+    """The removal loop (removal._run) never grows an array: before each removal it checks
+    the room the removal needs and, if short, returns; remove_points grows the pool or the
+    buffers and goes on. Points near two skew lines (Voronoi degrees in the hundreds, past the
+    first buffers of 64) with lists packed without slack (each list's first new neighbour
+    moves it, the pool grows again and again) give exactly the sequence of roomy lists."""
+    from tiledsimplify.core import simplify as simplify_mod
+
+    rng = np.random.default_rng(4)
+    m = 150
+    t = np.sort(rng.random(m))
+    X = np.concatenate([np.c_[t, np.zeros(m), np.zeros(m)],
+                        np.c_[np.full(m, 0.5), rng.random(m) - 0.5, np.full(m, 0.3)]])
+    X = X + 1e-4 * rng.uniform(-1, 1, X.shape)
+    runs = []
+    for slack in (8, 0):
+        packed_lists = simplify_mod.voronoi_neighbours
+        monkeypatch.setattr(simplify_mod, "voronoi_neighbours",
+                            lambda *a, _s=slack, _f=packed_lists, **k: _f(*a, **{**k,
+                                                                              "slack": _s}))
+        D, st, flags, imp = _state(X)
+        monkeypatch.undo()
+        assert st.cnt.max() > 64
+        if slack == 0:
+            assert (st.cap == st.cnt).all()
+        removable = ~flags
+        runs.append(remove_points(
+            X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
+            st.normals, st.stable, flags, removable, imp, heap.coordinate_hash(X), 0, 0.0, 0,
+            0.0, int(removable.sum()) - 10, BOX_FACTOR * D, TOL_FACTOR * D, np.inf, False))
+    (o1, a1, p1), (o2, a2, p2) = runs
+    assert len(o1) > 200 and p2.size > p1.size // 4
+    np.testing.assert_array_equal(o1, o2)
+    np.testing.assert_array_equal(a1, a2)
