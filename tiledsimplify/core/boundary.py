@@ -21,7 +21,7 @@ Threshold
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_leaf
 from .linalg import solve_small, tangent_basis
 
 #: default number of robust standard deviations above the median for an outlier
@@ -30,7 +30,7 @@ K_SIGMA = 3.0
 FLOOR = 0.05
 
 
-@jit
+@jit_leaf
 def deviation_at(X, normals, p, dn, c, A, b, frame):
     """The curvature-compensated normal deviation of ``p`` (see module docstring)."""
     if c < 3:

@@ -34,7 +34,7 @@ DESIGN.md §4 — whatever the noise and the scan-line anisotropy.
 
 import numpy as np
 
-from ._jit import jit, jit_inline
+from ._jit import jit, jit_inline, jit_leaf
 from .boundary import deviation_at
 from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covariance,
                      orient_canonical, smallest_axis, sym3_eigvals, tangent_basis)
@@ -101,7 +101,7 @@ NDIR = 4
 SWEEP_SIDE = 0.2
 
 
-@jit
+@jit_leaf
 def gather_rings(p, dn, dn_cnt, rings, mark, out):
     """``p``'s local-mesh neighbours up to ``rings`` rings away, without ``p``, into ``out``.
 
@@ -155,7 +155,7 @@ def smoothed_deviations(X, dn, dn_cnt, normals_out, out):
         out[p] = deviation_at(X, normals_out, p, ring, c, A, b, frame)
 
 
-@jit
+@jit_leaf
 def _plane_fit(X, idx, c, side, which, centre, normal, work):
     """PCA plane of the points ``idx[j]`` with ``side[j] == which``; returns their number.
 
@@ -192,7 +192,7 @@ def _plane_fit(X, idx, c, side, which, centre, normal, work):
     return k
 
 
-@jit
+@jit_leaf
 def _least_parallel(normals, idx, c, ref):
     """The point of ``idx[:c]`` whose normal is least parallel to ``ref``'s (ties: first)."""
     arg = ref
@@ -207,7 +207,7 @@ def _least_parallel(normals, idx, c, ref):
     return arg
 
 
-@jit
+@jit_leaf
 def _seed_by_normals(normals, idx, c, side):
     """Initial split: each point to the nearer in direction of two seed normals — the one
     least parallel to ``idx[0]``'s, then the one least parallel to that."""
@@ -332,7 +332,7 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work):
     return True
 
 
-@jit
+@jit_leaf
 def _project(X, idx, c, p, t1, t2, angle, proj):
     """``proj[j]``: offset of ``idx[j]`` from ``p`` along the tangent direction at ``angle``."""
     ca, sa = np.cos(angle), np.sin(angle)
@@ -363,7 +363,7 @@ def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing, proj,
     return _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line)
 
 
-@jit
+@jit_leaf
 def _edge_line(c1, n1, c2, n2, line):
     """The line where the planes through ``c1`` and ``c2`` with unit normals ``n1`` and ``n2``
     (not parallel) meet: ``line[:3]`` its point nearest the origin, ``line[3:]`` its unit
@@ -384,7 +384,7 @@ def _edge_line(c1, n1, c2, n2, line):
     line[3], line[4], line[5] = ux / un, uy / un, uz / un
 
 
-@jit
+@jit_leaf
 def _line_distance(X, p, line):
     """Distance from ``X[p]`` to the line ``line`` (:func:`_edge_line`): ``|(x - a) × u|``."""
     vx, vy, vz = X[p, 0] - line[0], X[p, 1] - line[1], X[p, 2] - line[2]
