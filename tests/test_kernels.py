@@ -72,7 +72,9 @@ def test_adjacency_append_remove_and_growth():
     start, cnt, cap, pool, meta = adjacency.from_edges(4, [(0, 1), (1, 2)], slack=0)
     assert adjacency.to_sets(start, cnt, pool) == [{1}, {0, 2}, {1}, set()]
     for j in range(100):
-        pool = adjacency.append(start, cnt, cap, pool, meta, 3, j)
+        if not adjacency.append_in_place(start, cnt, cap, pool, meta, 3, j):  # pool full
+            pool = adjacency.with_room(pool, meta, 2 * cap[3] + 8)
+            assert adjacency.append_in_place(start, cnt, cap, pool, meta, 3, j)
     assert adjacency.to_sets(start, cnt, pool)[3] == set(range(100))
     assert adjacency.to_sets(start, cnt, pool)[:3] == [{1}, {0, 2}, {1}]
     assert adjacency.remove(start, cnt, pool, 1, 0)

@@ -72,7 +72,7 @@ jit_inline = numba.njit(cache=True, nogil=True, inline="always", error_model=ERR
 #: numba's reference counting (``_nrt=False``). Their arrays are always the caller's, alive for
 #: the whole call, yet numba counted each array argument of a call or of an inlined copy with
 #: an atomic increment and decrement (the caller's loop kept them apart, out of reach of its
-#: pruning): 25-35 % of every stage's time in the kernels (perf samples on 100k scan points,
-#: 2026-12-03, docs/measurements.md "Reference counts"). A leaf may call other leaves, and
-#: may make views (``a[i]``, ``a[s:e]``), but not new arrays.
+#: pruning): 23-24 % of the core's perf samples on 100k scan points (16-37 % by stage), and
+#: ~10 % of its time (docs/measurements.md "Reference counts", 2026-12-03). A leaf may call
+#: other leaves, and may make views (``a[i]``, ``a[s:e]``), but not new arrays.
 jit_leaf = numba.njit(cache=True, nogil=True, error_model=ERROR_MODEL, _nrt=False)

@@ -3,7 +3,8 @@
 The Voronoi neighbourhoods change under removal (a removed point's neighbours gain each other,
 paper §3.3), so each point owns a block ``pool[start[i] : start[i] + cap[i]]`` of which the first
 ``cnt[i]`` entries are used. A full block moves to the end of the pool with twice the capacity;
-a full pool doubles. :func:`remove` keeps the order of the others and :func:`append` adds at
+a full pool doubles (:func:`with_room`, called between kernel loops, so that no loop replaces
+the pool). :func:`remove` keeps the order of the others and :func:`append_in_place` adds at
 the end; the order means nothing to the results, but :func:`.local_mesh.local_mesh` sorts a list
 nearest first in place, so lists stay (almost) sorted and its sort has little left to do.
 """
@@ -143,15 +144,6 @@ def remove(start, cnt, pool, i, j):
             cnt[i] = c - 1
             return True
     return False
-
-
-@jit
-def append(start, cnt, cap, pool, meta, i, j):
-    """Append ``j`` to the list of ``i``; returns the pool (a new array if it had to grow)."""
-    if cnt[i] == cap[i] and meta[0] + max(2 * cap[i], 8) > pool.size:
-        pool = with_room(pool, meta, max(2 * cap[i], 8))
-    append_in_place(start, cnt, cap, pool, meta, i, j)
-    return pool
 
 
 @jit_leaf

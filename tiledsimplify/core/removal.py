@@ -124,7 +124,7 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
             raise RuntimeError("remove_points: the neighbour pool ran out of room that "
                                "removal_room promised (a bug)")
         k = state[NEED_LINK]  # room for the next removal: grow what is short, then go on
-        if k > link.size or k + 5 > bufs.shape[1]:
+        if k > link.size:  # link, cand (L) and the clipping scratch (L + 5) grow together
             link = np.empty(2 * k, dtype=np.int64)
             cand = np.empty(2 * k, dtype=np.int64)
             bufs = np.empty((4, 2 * k + 5))
@@ -171,8 +171,7 @@ def _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, sta
         for j in range(k):
             most = max(most, cnt[pool[s + j]] + k)  # at most k - 2 new entries each
         room = removal_room(start, cnt, pool, p)
-        if (k > link.size or k + 5 > bufs.shape[1] or most + 5 > fbufs.shape[1]
-                or meta[0] + room > pool.size):
+        if k > link.size or most + 5 > fbufs.shape[1] or meta[0] + room > pool.size:
             state[STEP] = step
             state[SIZE] = size
             state[NEED_LINK] = k

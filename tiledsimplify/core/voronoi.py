@@ -154,8 +154,8 @@ def facet_positive(X, a, b, cand, ncand, half, tol, reach, xa, ya, la, xb, yb, l
     tries saved nothing: off there.
 
     ``xa, ya, la, xb, yb, lb`` are scratch buffers of length at least ``ncand + 5``; ``e1``
-    and ``e2`` of length 3 (the facet's frame). Callers make these views once, outside their
-    loops: numba counts every view made in a loop with an atomic increment and decrement.
+    and ``e2`` of length 3 (the facet's frame). A caller that counts references (not a leaf)
+    should make them once, outside its loops: it counts every view made in a loop.
     """
     ax, ay, az = X[a, 0], X[a, 1], X[a, 2]
     dx, dy, dz = X[b, 0] - ax, X[b, 1] - ay, X[b, 2] - az
@@ -603,9 +603,8 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
     (4, m) and ``lbufs`` (2, m) are clipping scratch with ``m >= cnt[p] + 5``. ``mark``
     (int64, one entry per point, all ``-1``) is scratch too; it is left all ``-1``.
 
-    A leaf (:data:`._jit.jit_leaf`): it never replaces the pool, so no array in its loops is
-    reference-counted (the pool replaced as it grew cost ~10 % of the removal loop in atomic
-    counts on it).
+    A leaf (:data:`._jit.jit_leaf`: no reference counting): it never allocates, the pool
+    included; the caller grows the pool between removals.
     """
     s = start[p]
     k = cnt[p]
@@ -626,8 +625,7 @@ def remove_point(X, p, start, cnt, cap, pool, meta, half, tol, reach, link, cand
     # Most pairs have no facet: the link goes nearest to p first, and for each pair the link
     # point nearest to its midpoint is moved to the front (see _nearest_to_midpoint_first),
     # so the clipped polygon empties after a few constraints.
-    # the scratch rows as views made once: a view made in the loop is counted (an atomic
-    # increment and decrement) at every facet test
+    # the scratch rows, as views made once
     xa, ya, xb, yb = bufs[0], bufs[1], bufs[2], bufs[3]
     la, lb = lbufs[0], lbufs[1]
     e1, e2 = frame[0], frame[1]
