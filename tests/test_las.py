@@ -136,6 +136,25 @@ def test_chunked_read_equals_whole_read(name):
         np.testing.assert_array_equal(attrs1[dim], attrs[dim], err_msg=dim)
 
 
+def test_parts_read_as_the_whole_from_any_point_of_a_laz(tmp_path):
+    import pickle
+    files = [lidar_file(AUTZEN), lidar_file(LONE_STAR)]
+    with pytest.warns(UserWarning, match="different CRS"):
+        src = LasSource(files, chunk_points=CHUNK)
+    whole = list(src.chunks())
+    parts = src.parts(2 * CHUNK + 5)  # two chunks a part; LAZ read from inside the file
+    assert [(p.path.name, p.lo, p.hi) for p in parts][:3] == [
+        (AUTZEN, 0, COUNTS[AUTZEN]), (LONE_STAR, 0, 2 * CHUNK),
+        (LONE_STAR, 2 * CHUNK, 4 * CHUNK)]
+    assert parts[-1].hi == COUNTS[LONE_STAR] and src.parts(1)[1].lo == CHUNK
+    got = [c for p in parts for c in pickle.loads(pickle.dumps(p))()]  # as a worker reads
+    assert len(got) == len(whole)
+    for (s1, x1, a1), (s2, x2, a2) in zip(whole, got):
+        assert s1 == s2 and np.array_equal(x1, x2)
+        assert a1.keys() == a2.keys() and all(np.array_equal(a1[k], a2[k]) for k in a1)
+    assert [len(p.chunks().__next__()[1]) for p in src.parts()] == [CHUNK, CHUNK]
+
+
 def test_folder_and_glob_read_as_one_cloud(tmp_path):
     folder = tmp_path / "tiles"
     folder.mkdir()

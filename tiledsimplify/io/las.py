@@ -64,6 +64,7 @@ import copy
 import datetime
 import errno
 import glob
+import itertools
 import os
 import re
 import tempfile
@@ -358,6 +359,64 @@ def _read_info(path: Path) -> LasFileInfo:
 # reading
 # --------------------------------------------------------------------------------------
 
+class LasPart:
+    """Points ``lo`` to ``hi - 1`` of one file of a :class:`LasSource`, read as its chunks
+    (global start indices, the source's attribute names) — :meth:`LasSource.parts`. Holds
+    paths and numbers only, so it pickles to other processes and cluster workers.
+
+    Calling it returns :meth:`chunks` (a chunk source for :meth:`.TileStore.create`)."""
+
+    def __init__(self, path, expect, first, lo, hi, chunk_points, names):
+        self.path = Path(path)
+        self.expect = tuple(expect)  # (point record size, point count) when opened
+        self.first, self.lo, self.hi = int(first), int(lo), int(hi)
+        self.chunk_points = int(chunk_points)
+        self.names = tuple(names)
+
+    def __call__(self) -> Iterator[tuple[int, np.ndarray, dict]]:
+        return self.chunks()
+
+    def __repr__(self) -> str:
+        return f"LasPart({self.path.name}, points {self.lo}..{self.hi - 1})"
+
+    def chunks(self) -> Iterator[tuple[int, np.ndarray, dict]]:
+        """This part's chunks, as :meth:`LasSource.chunks` gives them."""
+        path = self.path
+        if self.hi <= self.lo:
+            return
+        with _open_reader(path) as reader:
+            header = reader.header
+            if (header.point_format.size, int(header.point_count)) != self.expect:
+                raise FileFormatError(f"{path}: changed since it was opened; open it again.")
+            scales = np.asarray(header.scales, dtype=np.float64)
+            offsets = np.asarray(header.offsets, dtype=np.float64)
+            done = self.lo
+            if done:
+                try:
+                    reader.seek(done)
+                except Exception as exc:
+                    raise _format_error(path, exc, f" while seeking to point {done}") from exc
+            while done < self.hi:
+                want = min(self.chunk_points, self.hi - done)
+                try:
+                    rec = reader.read_points(want)
+                except Exception as exc:
+                    raise _format_error(path, exc, f" while reading points {done} to "
+                                                   f"{done + want - 1}") from exc
+                if len(rec) != want:
+                    raise FileFormatError(
+                        f"{path}: truncated: the header promises {self.expect[1]} points "
+                        f"but only {done + len(rec)} could be read. {_FIX_READ}")
+                xyz = np.empty((want, 3), dtype=np.float64)
+                for axis, dim in enumerate(_XYZ):
+                    np.multiply(rec[dim], scales[axis], out=xyz[:, axis])
+                    xyz[:, axis] += offsets[axis]
+                attrs = {name: np.array(rec[name]) for name in self.names}
+                del rec
+                yield self.first + done, xyz, attrs
+                done += want
+
+
 class LasSource:
     """One or more LAS/LAZ files read as one point cloud, chunk by chunk.
 
@@ -533,40 +592,27 @@ class LasSource:
             A file is truncated or corrupt (fewer points than its header promises, or the
             decompressor fails); the message names the file and the point range.
         """
-        start = 0
-        names = self._attribute_names
+        for part in self.parts():
+            yield from part.chunks()
+
+    def parts(self, max_points: int | None = None) -> list[LasPart]:
+        """The input cut in consecutive parts: each file, cut into ranges of at most
+        ``max_points`` (rounded down to whole chunks, at least one; None: whole files).
+        Their chunks, part after part, are :meth:`chunks`'s; each part opens its file itself
+        and pickles, so parts can be read at once by threads, processes or cluster workers
+        (a parallel ingest, :meth:`.TileStore.create`)."""
+        step = None
+        if max_points is not None:
+            step = max(1, int(max_points) // self.chunk_points) * self.chunk_points
+        out, first = [], 0
         for info in self.infos:
-            if info.point_count == 0:
-                continue
-            path = info.path
-            with _open_reader(path) as reader:
-                header = reader.header
-                if header.point_format.size != info.header.point_format.size or \
-                        int(header.point_count) != info.point_count:
-                    raise FileFormatError(f"{path}: changed since it was opened; open it again.")
-                scales = np.asarray(header.scales, dtype=np.float64)
-                offsets = np.asarray(header.offsets, dtype=np.float64)
-                done = 0
-                while done < info.point_count:
-                    want = min(self.chunk_points, info.point_count - done)
-                    try:
-                        rec = reader.read_points(want)
-                    except Exception as exc:
-                        raise _format_error(path, exc, f" while reading points {done} to "
-                                                       f"{done + want - 1}") from exc
-                    if len(rec) != want:
-                        raise FileFormatError(
-                            f"{path}: truncated: the header promises {info.point_count} points "
-                            f"but only {done + len(rec)} could be read. {_FIX_READ}")
-                    xyz = np.empty((want, 3), dtype=np.float64)
-                    for axis, dim in enumerate(_XYZ):
-                        np.multiply(rec[dim], scales[axis], out=xyz[:, axis])
-                        xyz[:, axis] += offsets[axis]
-                    attrs = {name: np.array(rec[name]) for name in names}
-                    del rec
-                    yield start + done, xyz, attrs
-                    done += want
-            start += info.point_count
+            count = info.point_count
+            cuts = [*range(0, count, step or max(count, 1)), count]
+            for lo, hi in itertools.pairwise(cuts):
+                out.append(LasPart(info.path, (info.header.point_format.size, count), first,
+                                   lo, hi, self.chunk_points, self._attribute_names))
+            first += count
+        return out
 
     def read_all(self) -> tuple[np.ndarray, dict]:
         """Every point at once (for tests and small inputs).
