@@ -175,10 +175,9 @@ def test_ingest_buffers_do_not_keep_input_chunks_alive():
     # holding remainders, ingest memory grew with the number of chunks (measured at 10M)
     from tiledsimplify.tiles.store import _TileBuffer
     chunk = np.arange(3000.0).reshape(1000, 3)
-    buf = _TileBuffer({"xyz": None}, chunk_rows=64)
+    buf = _TileBuffer(lambda: {"xyz": object()}, chunk_rows=64, keys=["xyz"])
     buf.add({"xyz": chunk[10:110]})
     assert not np.shares_memory(buf.pieces["xyz"][0], chunk)
-    buf.arrays = {"xyz": object()}
     n, jobs = buf.flush(aligned=True)
     assert n == 64 and not np.shares_memory(buf.pieces["xyz"][0], jobs[0][3])
     np.testing.assert_array_equal(buf.pieces["xyz"][0], chunk[74:110])
@@ -320,6 +319,64 @@ def test_chunked_ingest_equals_whole_ingest(tmp_path):
         wa, ha = whole.attrs(t), shuffled.attrs(t)
         for k in attrs:
             assert np.array_equal(ha[k][o], wa[k])
+
+
+def part_chunks(xyz, attrs, lo, hi, size):
+    """A chunk source over points lo..hi-1 only (one part of the input)."""
+    def source():
+        for s in range(lo, hi, size):
+            e = min(s + size, hi)
+            yield s, xyz[s:e], {k: v[s:e] for k, v in attrs.items()}
+    return source
+
+
+def thread_map(func, args, pass_number):
+    """``map_parts`` running every part at once, in threads (as dask would)."""
+    from concurrent.futures import ThreadPoolExecutor
+    with ThreadPoolExecutor(len(args)) as pool:
+        return [f.result() for f in [pool.submit(func, *a) for a in args]]
+
+
+@pytest.mark.parametrize("n_total", [None, 60_000])  # 60,000: each part samples below a key
+def test_ingest_in_parts_holds_what_one_ingest_holds(tmp_path, n_total):
+    xyz, attrs = sphere_plane(60_000, seed=3)
+    kw = dict(tile_points=8_000, config={}, provenance={}, sample_size=5_000, seed=4,
+              chunk_rows=1000, n_total=n_total)
+    whole = TileStore.create(tmp_path / "whole", make_chunks(xyz, attrs, 997), **kw)
+    # parts of unequal sizes, one empty, a small write buffer: partial chunks mid-part
+    cuts = [0, 997 * 7, 997 * 7, 997 * 30, 60_000]
+    parts = [part_chunks(xyz, attrs, lo, hi, 997) for lo, hi in zip(cuts[:-1], cuts[1:])]
+    split = TileStore.create(tmp_path / "parts", make_chunks(xyz, attrs, 997), parts=parts,
+                             map_parts=thread_map, buffer_points=2_500, **kw)
+    assert whole.plan == split.plan and whole.spacing == split.spacing
+    assert np.array_equal(whole.tile_counts, split.tile_counts)
+    a = split.root_attrs
+    assert a["ingest_parts"] == 4 and len(a["part_starts"]) == 4
+    assert np.array_equal(np.sum(a["part_counts"], axis=0), split.tile_counts)
+    assert not any(a["part_counts"][1])  # the empty part wrote nothing
+    for t in range(whole.n_tiles):
+        wx, wj = whole.core(t)
+        sx, sj = split.core(t)
+        assert np.array_equal(wx, sx) and np.array_equal(wj, sj)  # the same order too
+        assert np.array_equal(split.core_index(t), wj)
+        wa, sa = whole.attrs(t), split.attrs(t)
+        for k in attrs:
+            assert np.array_equal(wa[k], sa[k])
+        for got, want in zip(split.halo_points(t, owners=True),
+                             whole.halo_points(t, owners=True)):
+            assert np.array_equal(got, want)
+    check_partition(split, xyz)
+
+
+def test_a_part_samples_below_a_key_the_whole_sample_lies_under():
+    from tiledsimplify.tiles.store import _key_limit, _sample_keys
+    for n, k, seed in [(10_000, 500, 0), (1_000_000, 200_000, 3), (123_457, 1, 9)]:
+        limit = _key_limit(k, n)
+        assert limit is not None
+        keys = np.sort(_sample_keys(np.arange(n), seed))
+        assert keys[k - 1] < np.uint64(limit)          # the k smallest lie below it
+        assert (keys < np.uint64(limit)).sum() < 2 * k + 200  # and it keeps few more
+    assert _key_limit(1000, 1000) is None and _key_limit(10, None) is None
 
 
 def test_halo_points_match_brute_force(sp_data, sp_store):

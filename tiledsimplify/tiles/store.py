@@ -3,9 +3,9 @@
 Layout of the store directory (a zarr v3 group)::
 
     zarr.json                      root attributes (see below)
-    tiles/<id>/xyz                 float64 (k, 3)  core points of tile <id>
-    tiles/<id>/index               int64 (k,)      their global index in the input
-    tiles/<id>/attrs/<name>        (k, ...)        per-point attribute, input dtype
+    tiles/<id>/xyz                 float64 (r, 3)  core points of tile <id>
+    tiles/<id>/index               int64 (r,)      their global index in the input
+    tiles/<id>/attrs/<name>        (r, ...)        per-point attribute, input dtype
     tiles/<id>/result/<name>       (k, ...)        written by :meth:`TileStore.write_result`;
                                                    the result group's attribute ``done`` is
                                                    set true only after all its arrays are written
@@ -21,8 +21,17 @@ Root attributes: ``format``/``format_version``, ``complete`` (false until the in
 finished), ``plan`` (:meth:`TilePlan.to_dict`), ``halo``, ``halo_is_default``, ``spacing``,
 ``spacing_estimate`` (how it was obtained), ``n_total``, ``tile_points``, ``tile_counts``,
 ``bounds``, ``chunk_rows``, ``attributes`` (name -> dtype and trailing shape), ``sample_size``,
-``seed``, ``config`` (the caller's dict) and ``provenance`` (the caller's dict plus package,
+``seed``, ``ingest_parts``, ``part_starts`` and ``part_counts`` (below), ``config`` (the caller's
+dict) and ``provenance`` (the caller's dict plus package,
 zarr and numpy versions and the UTC creation time).
+
+The ingest reads the input as consecutive parts (one by default; a LAS/LAZ input read by several
+workers at once, :meth:`TileStore.create`'s ``parts``). Each part owns a region of every tile's
+``xyz``/``index``/``attrs`` arrays: ``r`` rows in all, part ``k``'s from row
+``part_starts[k]`` (its points rounded up to whole chunks), of which the first
+``part_counts[k][id]`` hold its points in tile ``id``. A tile's core is those rows, part after
+part: the input order, however many parts. The rest is never written (zarr stores no chunk
+for it).
 
 Input is any callable returning a fresh iterable of chunks ``(start_index, xyz, attrs)``:
 ``xyz`` is a finite float64 ``(m, 3)`` array, ``attrs`` maps names to ``(m, ...)`` arrays and
@@ -67,7 +76,10 @@ __all__ = [
 ChunkSource = Callable[[], Iterable[tuple[int, np.ndarray, Mapping[str, np.ndarray]]]]
 
 FORMAT = "tiledsimplify.tilestore"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: store versions this code reads (2: each part of the ingest writes its own region of a
+#: tile's arrays, ``part_starts`` / ``part_counts``; in 1 the arrays held the rows alone)
+READS_VERSIONS = (1, 2)
 DEFAULT_CHUNK_ROWS = 65_536
 HALO_SPACINGS = 10.0
 _WRITE_THREADS = 4  # concurrent array writes during ingest (zarr/blosc release the GIL)
@@ -244,23 +256,32 @@ class _BottomK:
     """Uniform sample without replacement of bounded size: keep the k smallest hash keys.
 
     Each point's key is a seeded hash of its global index, so the sample depends only on the
-    set of points and the seed, not on chunk sizes or chunk order.
+    set of points and the seed, not on chunk sizes or chunk order. A sample of one part of
+    the input may keep only keys below ``limit`` (:func:`_key_limit`): the k smallest keys of
+    the whole input lie below it (checked when the parts' samples are merged).
     """
 
-    def __init__(self, k: int, seed: int):
+    def __init__(self, k: int, seed: int, limit: int | None = None):
         self.k, self.seed = k, seed
+        self.limit = None if limit is None else np.uint64(limit)
         self.keys = np.zeros(0, dtype=np.uint64)
         self.xyz = np.zeros((0, 3))
         self.index = np.zeros(0, dtype=np.int64)
 
     def add(self, start: int, xyz: np.ndarray):
         idx = np.arange(start, start + xyz.shape[0], dtype=np.int64)
-        keys = _sample_keys(idx, self.seed)
+        self.merge(_sample_keys(idx, self.seed), idx, xyz)
+
+    def merge(self, keys: np.ndarray, idx: np.ndarray, xyz: np.ndarray):
+        """Add points with their keys (another sample's ``keys``, ``index``, ``xyz``)."""
+        if self.limit is not None:
+            keep = keys < self.limit
+            keys, idx, xyz = keys[keep], idx[keep], xyz[keep]
         if self.keys.size >= self.k:
             keep = keys < self.keys.max()
             keys, idx, xyz = keys[keep], idx[keep], xyz[keep]
-            if not keys.size:
-                return
+        if not keys.size:
+            return
         keys = np.concatenate([self.keys, keys])
         idx = np.concatenate([self.index, idx])
         xyz = np.concatenate([self.xyz, xyz])
@@ -274,15 +295,37 @@ class _BottomK:
         return self.xyz[order]
 
 
-class _TileBuffer:
-    """Per-tile pending rows, flushed to the zarr arrays in whole chunks where possible."""
+def _key_limit(k: int, n: int | None) -> int | None:
+    """A key below which the ``k`` smallest of ``n`` uniform 64-bit keys lie but for a chance
+    of ~1e-15 (8 standard deviations and 64 keys of margin); None when that is no limit."""
+    if n is None or n <= 0:
+        return None
+    want = k + 8.0 * np.sqrt(k) + 64.0
+    if want >= n:
+        return None
+    return int(want / n * 2.0 ** 64)
 
-    def __init__(self, arrays: dict[str, Any], chunk_rows: int):
-        self.arrays = arrays  # "xyz", "index", "attrs/<name>" -> zarr.Array
+
+class _TileBuffer:
+    """Per-tile pending rows, flushed to the zarr arrays in whole chunks where possible.
+
+    Rows go to the arrays from row ``base`` on (a part's region, :func:`_fill_part`).
+    ``arrays`` is a dict key -> zarr.Array, or a callable returning one at the first flush (a
+    part opens only the tiles it has points in)."""
+
+    def __init__(self, arrays, chunk_rows: int, keys: Iterable[str], base: int = 0):
+        self._arrays = arrays
         self.rows = chunk_rows
-        self.pieces: dict[str, list[np.ndarray]] = {k: [] for k in arrays}
+        self.base = int(base)
+        self.pieces: dict[str, list[np.ndarray]] = {k: [] for k in keys}
         self.pending = 0
         self.written = 0
+
+    @property
+    def arrays(self) -> dict[str, Any]:
+        if callable(self._arrays):
+            self._arrays = self._arrays()
+        return self._arrays
 
     def add(self, parts: dict[str, np.ndarray]):
         # copies, not views: a view of a few rows would keep the whole input chunk alive, and
@@ -316,7 +359,7 @@ class _TileBuffer:
         for k, arr in self.arrays.items():
             data = np.concatenate(self.pieces[k]) if len(self.pieces[k]) > 1 \
                 else self.pieces[k][0]
-            jobs.append((arr, self.written, end, data[:n]))
+            jobs.append((arr, self.base + self.written, self.base + end, data[:n]))
             self.pieces[k] = [data[n:].copy()] if n < data.shape[0] else []
         self.written = end
         self.pending -= n
@@ -325,7 +368,6 @@ class _TileBuffer:
 
 def _write_job(job) -> None:
     arr, start, end, data = job
-    arr.resize((end,) + arr.shape[1:])
     arr[start:end] = data
 
 
@@ -333,6 +375,153 @@ def _run_jobs(pool: ThreadPoolExecutor, jobs: list) -> None:
     """Run write jobs concurrently (each touches a different array) and re-raise errors."""
     for f in [pool.submit(_write_job, j) for j in jobs]:
         f.result()
+
+
+def _map_here(progress):
+    """The default ``map_parts`` of :meth:`TileStore.create`: the parts one after another in
+    this process, reporting ``progress(pass, points read so far in the pass)`` per chunk."""
+
+    def run(func, args, pass_number):
+        done = 0
+        if progress is not None:
+            progress(pass_number, 0)
+        out = []
+        for a in args:
+            base = done
+            step = None if progress is None else (
+                lambda read, base=base: progress(pass_number, base + read))
+            result = func(*a, progress=step)
+            done += result["points"]
+            out.append(result)
+        return out
+
+    return run
+
+
+def _scan_part(part, sample_size: int, seed: int, limit: int | None, progress=None) -> dict:
+    """Pass 1 of the ingest over one part of the input: its chunks' ``(start, size)``, its
+    bounds, its sample (the part's smallest keys, below ``limit`` if given: :class:`_BottomK`)
+    and the attribute schema of its first chunk. Runs where ``map_parts`` puts it."""
+    check = _ChunkChecker()
+    sampler = _BottomK(sample_size, seed, limit)
+    intervals: list[tuple[int, int]] = []
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    read = 0
+    for item in part():
+        start, xyz, _ = check(item)
+        m = xyz.shape[0]
+        intervals.append((start, m))
+        read += m
+        if progress is not None:
+            progress(read)
+        if not m:
+            continue
+        lo = np.minimum(lo, xyz.min(axis=0))
+        hi = np.maximum(hi, xyz.max(axis=0))
+        sampler.add(start, xyz)
+    return {"points": read, "intervals": intervals, "lo": lo, "hi": hi, "keys": sampler.keys,
+            "index": sampler.index, "xyz": sampler.xyz, "spec": check.spec}
+
+
+def _merge_specs(specs):
+    """The attribute schema of the whole input from its parts' (None: a part without chunks):
+    the first part's, which every other part's must match as a later chunk must match the
+    first (:class:`_ChunkChecker`)."""
+    known = [sp for sp in specs if sp is not None]
+    if not known:
+        return None
+    first = known[0]
+    for sp in known[1:]:
+        if set(sp) != set(first):
+            raise InputError(f"parts of the input have attributes {sorted(sp)} and "
+                             f"{sorted(first)}; every chunk must have the same ones")
+        for name, (dtype, trail) in first.items():
+            d, tr = sp[name]
+            if tr != trail or not np.can_cast(d, dtype, casting="safe"):
+                raise InputError(f"attribute {name!r} is {d}{list(tr)} in one part of the "
+                                 f"input but {dtype}{list(trail)} in the first")
+    return first
+
+
+def _fill_part(path: str, part, base: int, intervals, spec, buffer_points: int,
+               arrays=None, progress=None) -> dict:
+    """Pass 2 of the ingest over one part: assign each point to its tile and append it, in
+    input order, to the tile's arrays from row ``base`` on — the part's own region of every
+    tile's arrays, whole chunks that no other part writes, so parts may run at once in any
+    processes. ``arrays``: the tiles' arrays by ``(tile, key)`` if the caller made them in
+    this process, else each tile's are opened at its first write. Returns the points read
+    and the rows written per tile."""
+    store = LocalStore(path)
+    root = zarr.open_group(store, mode="r+")
+    plan = TilePlan.from_dict(root.attrs["plan"])
+    chunk_rows = int(root.attrs["chunk_rows"])
+    keys = ["xyz", "index"] + [f"attrs/{name}" for name in spec]
+
+    def tile_arrays(t):
+        if arrays is not None:
+            return {key: arrays[(t, key)] for key in keys}
+        return {key: root[f"tiles/{t}/{key}"] for key in keys}
+
+    buffers = [_TileBuffer(lambda t=t: tile_arrays(t), chunk_rows, keys, base)
+               for t in range(plan.n_tiles)]
+    pending_total = 0
+    check = _ChunkChecker()
+    check.spec = spec
+    j = 0
+    read = 0
+    with ThreadPoolExecutor(max_workers=_WRITE_THREADS) as pool:
+        for item in part():
+            start, xyz, a = check(item)
+            m = xyz.shape[0]
+            if j >= len(intervals) or tuple(intervals[j]) != (start, m):
+                raise InputError(
+                    "the chunk source gave different chunks on the second pass (chunk "
+                    f"{j}: expected (start, size) "
+                    f"{tuple(intervals[j]) if j < len(intervals) else None}, got "
+                    f"{(start, m)}); it must be re-iterable and deterministic")
+            j += 1
+            read += m
+            if not m:
+                continue
+            tile = plan.assign(xyz)
+            order = np.argsort(tile, kind="stable")
+            counts = np.bincount(tile, minlength=plan.n_tiles)
+            edges = np.concatenate([[0], np.cumsum(counts)])
+            index = np.arange(start, start + m, dtype=np.int64)[order]
+            xyz_s = xyz[order]
+            attrs_s = {f"attrs/{nm}": v[order] for nm, v in a.items()}
+            jobs = []
+            for t in np.flatnonzero(counts):
+                s, e = edges[t], edges[t + 1]
+                parts = {"xyz": xyz_s[s:e], "index": index[s:e]}
+                for key, v in attrs_s.items():
+                    parts[key] = v[s:e]
+                buf = buffers[t]
+                buf.add(parts)
+                pending_total += e - s
+                if buf.pending >= chunk_rows:
+                    taken, new = buf.flush(aligned=True)
+                    pending_total -= taken
+                    jobs += new
+            if pending_total > buffer_points:
+                # Over budget: empty the fullest buffers (partial chunks) to half budget.
+                for t in np.argsort([-b.pending for b in buffers], kind="stable"):
+                    if pending_total <= buffer_points // 2:
+                        break
+                    taken, new = buffers[t].flush(aligned=False)
+                    pending_total -= taken
+                    jobs += new
+            _run_jobs(pool, jobs)
+            del jobs
+            if progress is not None:
+                progress(read)
+        if j != len(intervals):
+            raise InputError(f"the chunk source gave {j} chunks on the second pass but "
+                             f"{len(intervals)} on the first; it must be re-iterable")
+        for b in buffers:
+            _run_jobs(pool, b.flush(aligned=False)[1])
+    return {"points": read, "counts": [b.written for b in buffers]}
 
 
 def _now() -> str:
@@ -368,6 +557,8 @@ class TileStore:
         self._attrs = a
         self.plan = TilePlan.from_dict(a["plan"])
         self._arrays: dict[tuple[int, str], Any] = {}
+        self._part_counts = np.asarray(a.get("part_counts", []), dtype=np.int64).reshape(
+            -1, self.plan.n_tiles)
 
     # ------------------------------------------------------------------ creation
     @classmethod
@@ -375,7 +566,7 @@ class TileStore:
                config: dict, provenance: dict, sample_size: int = 200_000, seed: int = 0,
                n_total: int | None = None, chunk_rows: int | None = None,
                buffer_points: int = 2_000_000, overwrite: bool = False,
-               progress=None) -> "TileStore":
+               progress=None, parts=None, map_parts=None) -> "TileStore":
         """Stream a point cloud into a new tile store.
 
         Pass 1 reads every chunk once to count the points, check that the chunks cover
@@ -421,6 +612,18 @@ class TileStore:
         progress : callable, optional
             ``progress(pass_number, points_read)`` as each pass starts (0 points) and after
             each of its chunks (points read so far in that pass); 100M points took 90 s.
+            Only without ``map_parts``, which reports progress itself.
+        parts : sequence of callables, optional
+            The input cut in consecutive parts, each a chunk source like ``chunks`` over a
+            contiguous range of the global index (their chunks, part after part, are the
+            input's); picklable if ``map_parts`` runs them in other processes. Default: one
+            part, ``chunks``.
+        map_parts : callable, optional
+            ``map_parts(func, args, pass_number)`` returns ``[func(*a) for a in args]``, run
+            anywhere (dask workers, other processes): each pass is one task per part, the
+            second writing each part's points of a tile to its own fragment of the tile's
+            arrays (read back in part order, so a store ingested in parts holds what one
+            ingested whole holds). Default: the parts one after another in this process.
 
         Returns
         -------
@@ -461,28 +664,34 @@ class TileStore:
         path = Path(path)
         cls._prepare_path(path, overwrite)
 
-        # ---- pass 1: count, cover check, bounds, sample
-        check = _ChunkChecker()
-        sampler = _BottomK(sample_size, seed)
-        intervals: list[tuple[int, int]] = []
-        lo = np.full(3, np.inf)
-        hi = np.full(3, -np.inf)
-        read = 0
-        if progress is not None:
-            progress(1, 0)
-        for item in chunks():
-            start, xyz, _ = check(item)
-            m = xyz.shape[0]
-            intervals.append((start, m))
-            read += m
-            if progress is not None:
-                progress(1, read)
-            if not m:
-                continue
-            lo = np.minimum(lo, xyz.min(axis=0))
-            hi = np.maximum(hi, xyz.max(axis=0))
-            sampler.add(start, xyz)
+        if parts is None:
+            parts = [chunks]
+        else:
+            parts = list(parts)
+            if not parts or not all(callable(part) for part in parts):
+                raise InputError("parts must be a non-empty sequence of chunk sources (each a "
+                                 "callable returning a fresh iterable of chunks)")
+        n_parts = len(parts)
+        in_process = map_parts is None
+        if in_process:
+            map_parts = _map_here(progress)
+
+        # ---- pass 1: count, cover check, bounds, sample (one task per part)
+        limit = _key_limit(sample_size, n_total) if n_parts > 1 else None
+        scans = map_parts(_scan_part, [(part, sample_size, seed, limit) for part in parts], 1)
+        intervals = [tuple(iv) for scan in scans for iv in scan["intervals"]]
         n = cls._check_cover(intervals, n_total)
+        sampler = _BottomK(sample_size, seed)
+        for scan in scans:
+            sampler.merge(scan["keys"], scan["index"], scan["xyz"])
+        if sampler.keys.size < min(sample_size, n):  # pragma: no cover - odds ~1e-15
+            scans = map_parts(_scan_part, [(part, sample_size, seed, None) for part in parts], 1)
+            sampler = _BottomK(sample_size, seed)
+            for scan in scans:
+                sampler.merge(scan["keys"], scan["index"], scan["xyz"])
+        lo = np.min([scan["lo"] for scan in scans], axis=0)
+        hi = np.max([scan["hi"] for scan in scans], axis=0)
+        spec = _merge_specs([scan["spec"] for scan in scans]) or {}
         sample = sampler.result()
         spacing, sample_median = estimate_spacing(sample, n)
         halo_is_default = halo is None
@@ -491,7 +700,6 @@ class TileStore:
         bounds = np.stack([lo, hi])
         plan = plan_tiles(sample, n, tile_points, bounds=bounds, halo=halo)
         del sample, sampler
-        spec = check.spec or {}
 
         attrs = {
             "format": FORMAT,
@@ -516,6 +724,7 @@ class TileStore:
                            in spec.items()},
             "sample_size": sample_size,
             "seed": int(seed),
+            "ingest_parts": n_parts,
             "config": config,
             "provenance": {**provenance,
                            "tiledsimplify_version": _package_version(),
@@ -524,10 +733,16 @@ class TileStore:
                            "created_utc": _now()},
         }
         # ---- layout: the root (marked incomplete) first, then all tile groups and empty
-        # arrays at once (concurrent metadata writes)
+        # arrays at once (concurrent metadata writes). Each part of the input owns a region
+        # of every tile's arrays (its points rounded up to whole chunks, in part order): a
+        # tile's rows are the first of each region (``part_counts``), read in part order.
+        sizes = [-(-sum(m for _, m in scan["intervals"]) // chunk_rows) * chunk_rows
+                 for scan in scans]
+        starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        attrs["part_starts"] = starts[:-1].tolist()
         store = LocalStore(path)
         root = zarr.open_group(store, mode="w", attributes=attrs)
-        templates = cls._array_templates(spec, chunk_rows)
+        templates = cls._array_templates(spec, chunk_rows, int(starts[-1]))
         nodes: dict[str, Any] = {"tiles": GroupMetadata()}
         for t in range(plan.n_tiles):
             nodes[f"tiles/{t}"] = GroupMetadata()
@@ -536,72 +751,21 @@ class TileStore:
                 nodes[f"tiles/{t}/{key}"] = meta
         made = dict(zarr.create_hierarchy(store=store, nodes=nodes))
 
-        # ---- pass 2: assign and append
-        buffers = [_TileBuffer({key: made[f"tiles/{t}/{key}"] for key in templates}, chunk_rows)
-                   for t in range(plan.n_tiles)]
+        # ---- pass 2: assign and append, one task per part
+        here = {(t, key): made[f"tiles/{t}/{key}"] for t in range(plan.n_tiles)
+                for key in templates} if in_process else None
         del made
-        pending_total = 0
-        check2 = _ChunkChecker()
-        check2.spec = check.spec
-        k = 0
-        read = 0
-        if progress is not None:
-            progress(2, 0)
-        with ThreadPoolExecutor(max_workers=_WRITE_THREADS) as pool:
-            for item in chunks():
-                start, xyz, a = check2(item)
-                m = xyz.shape[0]
-                if k >= len(intervals) or intervals[k] != (start, m):
-                    raise InputError(
-                        "the chunk source gave different chunks on the second pass (chunk "
-                        f"{k}: expected (start, size) "
-                        f"{intervals[k] if k < len(intervals) else None}, got {(start, m)}); "
-                        "it must be re-iterable and deterministic")
-                k += 1
-                read += m
-                if not m:
-                    continue
-                tile = plan.assign(xyz)
-                order = np.argsort(tile, kind="stable")
-                counts = np.bincount(tile, minlength=plan.n_tiles)
-                edges = np.concatenate([[0], np.cumsum(counts)])
-                index = np.arange(start, start + m, dtype=np.int64)[order]
-                xyz_s = xyz[order]
-                attrs_s = {f"attrs/{nm}": v[order] for nm, v in a.items()}
-                jobs = []
-                for t in np.flatnonzero(counts):
-                    s, e = edges[t], edges[t + 1]
-                    parts = {"xyz": xyz_s[s:e], "index": index[s:e]}
-                    for key, v in attrs_s.items():
-                        parts[key] = v[s:e]
-                    buf = buffers[t]
-                    buf.add(parts)
-                    pending_total += e - s
-                    if buf.pending >= chunk_rows:
-                        taken, new = buf.flush(aligned=True)
-                        pending_total -= taken
-                        jobs += new
-                if pending_total > buffer_points:
-                    # Over budget: empty the fullest buffers (partial chunks) to half budget.
-                    for t in np.argsort([-b.pending for b in buffers], kind="stable"):
-                        if pending_total <= buffer_points // 2:
-                            break
-                        taken, new = buffers[t].flush(aligned=False)
-                        pending_total -= taken
-                        jobs += new
-                _run_jobs(pool, jobs)
-                del jobs
-                if progress is not None:
-                    progress(2, read)
-            if k != len(intervals):
-                raise InputError(f"the chunk source gave {k} chunks on the second pass but "
-                                 f"{len(intervals)} on the first; it must be re-iterable")
-            for b in buffers:
-                _run_jobs(pool, b.flush(aligned=False)[1])
-        tile_counts = [b.written for b in buffers]
-        if sum(tile_counts) != n:  # pragma: no cover - guarded by the checks above
-            raise StoreError(f"internal error: wrote {sum(tile_counts)} of {n} points")
-        root.update_attributes({"tile_counts": tile_counts, "complete": True})
+        fills = map_parts(_fill_part, [
+            (str(path), part, int(starts[k]), scans[k]["intervals"], spec, buffer_points, here)
+            for k, part in enumerate(parts)], 2)
+        counts = np.array([fill["counts"] for fill in fills], dtype=np.int64).reshape(
+            n_parts, plan.n_tiles)
+        tile_counts = counts.sum(axis=0)
+        if int(tile_counts.sum()) != n:  # pragma: no cover - guarded by the checks above
+            raise StoreError(f"internal error: wrote {int(tile_counts.sum())} of {n} points")
+        done = {"tile_counts": tile_counts.tolist(), "part_counts": counts.tolist(),
+                "complete": True}
+        root.update_attributes(done)
         return cls.open(path)
 
     @staticmethod
@@ -646,13 +810,14 @@ class TileStore:
         return n
 
     @staticmethod
-    def _array_templates(spec, chunk_rows: int) -> dict[str, Any]:
-        """Metadata of the empty per-tile arrays, made once in memory and reused."""
+    def _array_templates(spec, chunk_rows: int, rows: int = 0) -> dict[str, Any]:
+        """Metadata of the per-tile arrays of ``rows`` rows (none written yet), made once in
+        memory and reused."""
         mem = zarr.open_group(MemoryStore(), mode="w")
         out = {}
 
         def make(key, dtype, trail):
-            arr = mem.create_array(key.replace("/", "_"), shape=(0,) + tuple(trail),
+            arr = mem.create_array(key.replace("/", "_"), shape=(rows,) + tuple(trail),
                                    dtype=dtype, chunks=(chunk_rows,) + tuple(trail),
                                    compressors=_codec(), fill_value=0)
             out[key] = arr.metadata
@@ -687,7 +852,7 @@ class TileStore:
             raise StoreError(f"{path} is a zarr group but not a tiledsimplify tile store (it "
                              "may be the remains of a creation interrupted at its very start); "
                              "delete it or use a fresh --store path")
-        if attrs.get("format_version") != FORMAT_VERSION:
+        if attrs.get("format_version") not in READS_VERSIONS:
             raise StoreError(f"{path} has tile store format version "
                              f"{attrs.get('format_version')!r}; this version reads "
                              f"{FORMAT_VERSION}. Re-create the store.")
@@ -781,6 +946,21 @@ class TileStore:
             self._arrays[(tile, key)] = arr
         return arr
 
+    def _read(self, tile: int, key: str) -> np.ndarray:
+        """A tile's whole array ``key``: the rows each part of the ingest wrote in its region,
+        in part order (format 2), or the whole array (format 1)."""
+        arr = self._array(tile, key)
+        starts = self._attrs.get("part_starts")
+        if starts is None:
+            return arr[:]
+        counts = self._part_counts[:, tile]
+        pieces = [arr[s:s + c] for s, c in zip(starts, counts.tolist()) if c]
+        if len(pieces) == 1:
+            return pieces[0]
+        if not pieces:
+            return arr[0:0]
+        return np.concatenate(pieces)
+
     # ------------------------------------------------------------------ reading
     def count(self, tile: int) -> int:
         """Number of core points of a tile."""
@@ -805,11 +985,11 @@ class TileStore:
             Global input index of each point, in the order the points were read.
         """
         t = self._tile(tile)
-        return self._array(t, "xyz")[:], self._array(t, "index")[:]
+        return self._read(t, "xyz"), self._read(t, "index")
 
     def core_index(self, tile: int) -> np.ndarray:
         """A tile's core points' global input indices (:meth:`core` without the points)."""
-        return self._array(self._tile(tile), "index")[:]
+        return self._read(self._tile(tile), "index")
 
     def halo_points(self, tile: int, halo: float | None = None, *,
                     owners: bool = False) -> tuple[np.ndarray, ...]:
@@ -901,7 +1081,7 @@ class TileStore:
         if unknown:
             raise InputError(f"unknown attribute(s) {unknown}; the store has "
                              f"{self.attribute_names}")
-        return {n: self._array(t, f"attrs/{n}")[:] for n in names}
+        return {n: self._read(t, f"attrs/{n}") for n in names}
 
     # ------------------------------------------------------------------ results
     def _result_group(self, tile: int):
