@@ -380,6 +380,26 @@ def test_las_end_to_end_keeps_every_dimension(data_dir, tmp_path):
     assert int(np.asarray(b["sharp_edge"]).sum()) == s.n_boundary
 
 
+def test_las_ingested_in_parts_by_the_workers_gives_the_same_output(data_dir, tmp_path,
+                                                                   cluster, caplog,
+                                                                   monkeypatch):
+    import importlib
+    run_module = importlib.import_module("tiledsimplify.pipeline.run")
+    src = data_dir / "lidar" / "autzen_trim.laz"
+    kw = dict(ratio=0.3, tile_points=30000, chunk_points=20_000)
+    base = run(src, tmp_path / "one.laz", scheduler="synchronous", **kw)
+    monkeypatch.setattr(run_module, "INGEST_PART_POINTS", 20_000)
+    monkeypatch.setattr(run_module, "INGEST_PARTS_FROM", 2)
+    for name, extra in [("threads", {"scheduler": "threads", "workers": 4}),
+                        ("cluster", {"client": cluster})]:
+        caplog.clear()
+        with caplog.at_level("INFO", logger="tiledsimplify"):
+            s = run(src, tmp_path / f"{name}.laz", **kw, **extra)
+        assert any("6 parts read at once" in r.getMessage() for r in caplog.records), name
+        assert s.n_output == base.n_output
+        assert (tmp_path / f"{name}.laz").read_bytes() == (tmp_path / "one.laz").read_bytes()
+
+
 def test_cli_run_with_config(bunny, tmp_path, caplog):
     X, path = bunny
     cfg = tmp_path / "c.toml"

@@ -219,6 +219,57 @@ class _IngestProgress:
             self.report = None
 
 
+#: a parallel ingest cuts the input in parts of at least this many points (whole chunks)
+INGEST_PART_POINTS = 1_000_000
+#: ... and only with at least this many worker threads: an ingest in this process already
+#: keeps ~1.3 cores busy (LAZ decompression and chunk compression run in threads), and on 2
+#: cores 3 parts at once took as long (2026-12-03, docs/measurements.md "Ingest in parts")
+INGEST_PARTS_FROM = 4
+
+
+def _ingest_parts(source, n, scheduler, workers, client):
+    """The parts of the input an ingest reads at once, one task each on the run's scheduler
+    (:meth:`.TileStore.create`), or None to read it in this process: a source that cannot be
+    cut (text, NPY, PLY: only LAS/LAZ can), the synchronous scheduler, fewer than
+    :data:`INGEST_PARTS_FROM` worker threads. About four parts per worker thread, each of at
+    least :data:`INGEST_PART_POINTS`, within files (a LAZ file is read from any point by its
+    chunk table)."""
+    if not hasattr(source, "parts") or (client is None and scheduler == "synchronous"):
+        return None
+    if client is not None:
+        slots = sum(client.nthreads().values())
+    else:
+        slots = int(workers or os.cpu_count() or 1)
+    if slots < INGEST_PARTS_FROM:
+        return None
+    parts = source.parts(max(INGEST_PART_POINTS, math.ceil(n / (4 * slots))))
+    return parts if len(parts) > 1 else None
+
+
+def _parts_mapper(scheduler, workers, client, ingest):
+    """``map_parts`` of :meth:`.TileStore.create` on the run's scheduler: a pass is one task
+    per part, reported to ``ingest`` (:class:`_IngestProgress`) as each part ends."""
+
+    def run(func, args, pass_number):
+        token = uuid.uuid4().hex
+        name = func.__name__.strip("_").replace("_", "-")
+        last = len(args) - 1
+        tasks = [dask.delayed(func, pure=False)(
+            *a, dask_key_name=f"ingest-{name}-{last - i:05d}-{token}")  # first parts first
+            for i, a in enumerate(args)]
+        read = [0]
+
+        def line(result, done, total, pace=""):
+            read[0] += result["points"]
+            ingest(pass_number, read[0])
+
+        ingest(pass_number, 0)
+        return _compute(tasks, scheduler, workers, client, False, f"ingest {pass_number}/2",
+                        line)
+
+    return run
+
+
 def _whole(value, name):
     """``value`` as an int if it is a whole number (``1e6`` from a config file too), else an
     error naming the parameter; None stays None."""
@@ -548,17 +599,21 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          len(ts.done_tiles()), ts.n_tiles)
         if ts is None:
             ingest = _IngestProgress(n, progress)
+            parts = _ingest_parts(source, n, scheduler, workers, client)
             try:
                 ts = TileStore.create(
                     store_path, source.chunks, tile_points=int(tile_points), halo=halo,
                     n_total=n, config={"fingerprint": fp, **settings},
                     provenance={"input": [str(f) for f in getattr(source, "files", [])],
-                                "output": str(output)}, progress=ingest, overwrite=again)
+                                "output": str(output)}, progress=ingest, overwrite=again,
+                    parts=parts, map_parts=None if parts is None else _parts_mapper(
+                        scheduler, workers, client, ingest))
             finally:
                 ingest.close()
-            log.info("ingested %s points into %s tiles (halo %.4g, spacing %.4g) in %.1f s",
+            log.info("ingested %s points into %s tiles (halo %.4g, spacing %.4g) in %.1f s%s",
                      f"{n:,}", f"{ts.n_tiles:,}", ts.halo, ts.spacing,
-                     time.perf_counter() - clock[0])
+                     time.perf_counter() - clock[0],
+                     "" if parts is None else f", {len(parts)} parts read at once")
         stage("ingest")
         if warming is not None:  # the kernels' first compile, started before the ingest
             warming.join()
