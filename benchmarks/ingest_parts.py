@@ -51,16 +51,17 @@ def main(argv=None):
 
     src = open_source(args.input)
     parts = src.parts(args.part_points)
-    kw = dict(tile_points=args.tile_points, config={}, provenance={}, n_total=src.count)
+    kw = {"tile_points": args.tile_points, "config": {}, "provenance": {},
+          "n_total": src.count}
     rows = []
     with tempfile.TemporaryDirectory() as tmp, distributed.LocalCluster(
             n_workers=args.workers, threads_per_worker=1, processes=True,
             dashboard_address=None) as cluster, distributed.Client(cluster) as client:
         client.run(lambda: __import__("tiledsimplify.tiles.store"))  # imports out of the timing
         stores = {}
-        for r in range(args.rounds):
-            for how in ("whole, in this process", f"{len(parts)} parts on {args.workers} "
-                                                  "workers"):
+        split = f"{len(parts)} parts on {args.workers} workers"
+        for _ in range(args.rounds):
+            for how in ("whole, in this process", split):
                 path = Path(tmp) / f"s{len(rows)}"
                 before = client.run(_cpu)
                 t, c = time.perf_counter(), _cpu()
