@@ -150,12 +150,19 @@ def _build(X, order, n_real, cap, work):
     array a loop-carried variable, whose every use numba's reference counting wrapped in an
     atomic increment and decrement: 35-40 % of the build's perf samples on 100k scan points;
     the build took 0.50 s there before, 0.40 s since.
+
+    A tetrahedron's corners and neighbours share one 32-byte record (``tets`` and ``nbr`` are
+    views of it), and one array tells whether it is in the cavity or was tested outside it:
+    the cavity search reads both for each neighbour it meets, a cache miss each when they
+    were four arrays. Build 0.91x the time (median of 8 alternating pairs, 0.75-1.0, 100k
+    scan points; the same tetrahedra).
     """
-    tets = np.empty((cap, 4), dtype=np.int32)  # int32: half the memory traffic of int64
-    nbr = np.full((cap, 4), -1, dtype=np.int32)
+    rec = np.empty((cap, 8), dtype=np.int32)  # int32: half the memory traffic of int64
+    rec[:, 4:] = -1
+    tets, nbr = rec[:, :4], rec[:, 4:]
     alive = np.zeros(cap, dtype=np.bool_)
-    stamp = np.zeros(cap, dtype=np.int32)  # == mark: in the current cavity
-    seen = np.zeros(cap, dtype=np.int32)   # == mark: tested, outside the cavity
+    flag = np.zeros(cap, dtype=np.int32)  # 2 mark: in the current cavity; 2 mark + 1: tested,
+    # outside it (one array: one load tells both)
     free = np.empty(cap, dtype=np.int32)
     s0, s1, s2, s3 = n_real, n_real + 1, n_real + 2, n_real + 3
     if _orient(X, s0, s1, s2, s3) < 0.0:
@@ -167,15 +174,15 @@ def _build(X, order, n_real, cap, work):
     state[N_TETS] = 1
     rnd = np.full(1, 88172645463325252, dtype=np.uint64)
     while True:
-        status = _insert(X, order, tets, nbr, alive, stamp, seen, free, cavity, stack, bt, bf,
+        status = _insert(X, order, tets, nbr, alive, flag, free, cavity, stack, bt, bf,
                          fv, hstamp, hx, hy, ht, hf, state, rnd)
         if status == DONE:
             break
         if status == FAILED:
             return tets[:0], False
         if status == GROW_TETS:
-            tets, nbr, alive, stamp, seen, free = _grow_all(tets, nbr, alive, stamp, seen,
-                                                            free)
+            rec, alive, flag, free = _grow_all(rec, alive, flag, free)
+            tets, nbr = rec[:, :4], rec[:, 4:]
         else:  # GROW_WORK: room for twice what the point needs
             while work < 2 * state[NEED]:
                 work *= 2
@@ -201,13 +208,13 @@ def _work_buffers(work):
 
 
 @jit
-def _insert(X, order, tets, nbr, alive, stamp, seen, free, cavity, stack, bt, bf, fv, hstamp,
+def _insert(X, order, tets, nbr, alive, flag, free, cavity, stack, bt, bf, fv, hstamp,
             hx, hy, ht, hf, state, rnd_state):
     """Insert ``X[order[state[STEP]:]]`` until done or an array is full (see :func:`_build`).
 
     ``state`` (:data:`STEP` ...) and ``rnd_state`` (the walk's xorshift state) are saved
     after every completed point, so a point stopped for room starts again exactly as before;
-    its marks in ``stamp``/``seen`` are left behind under a mark not used again.
+    its marks in ``flag`` are left behind under a mark not used again.
     """
     n_tets, n_free, last = state[N_TETS], state[N_FREE], state[LAST]
     mark = state[MARK]
@@ -247,7 +254,7 @@ def _insert(X, order, tets, nbr, alive, stamp, seen, free, cavity, stack, bt, bf
         state[MARK] = mark
         n_cav = 1
         cavity[0] = t
-        stamp[t] = mark
+        flag[t] = 2 * mark
         n_st = 1
         stack[0] = t
         while True:
@@ -256,19 +263,19 @@ def _insert(X, order, tets, nbr, alive, stamp, seen, free, cavity, stack, bt, bf
                 T = stack[n_st]
                 for i in range(4):
                     u = nbr[T, i]
-                    if u < 0 or stamp[u] == mark or seen[u] == mark:
+                    if u < 0 or flag[u] >= 2 * mark:  # in the cavity or tested
                         continue
                     if _insphere(X, tets[u, 0], tets[u, 1], tets[u, 2], tets[u, 3], p) > 0.0:
                         if n_cav == work:  # the stack never holds more than the cavity
                             state[NEED] = n_cav + 1
                             return GROW_WORK
-                        stamp[u] = mark
+                        flag[u] = 2 * mark
                         cavity[n_cav] = u
                         n_cav += 1
                         stack[n_st] = u
                         n_st += 1
                     else:
-                        seen[u] = mark
+                        flag[u] = 2 * mark + 1
             # boundary facets; any not strictly visible from p: take its outer tetrahedron in
             n_b = 0
             bad = -1
@@ -276,7 +283,7 @@ def _insert(X, order, tets, nbr, alive, stamp, seen, free, cavity, stack, bt, bf
                 T = cavity[j]
                 for i in range(4):
                     u = nbr[T, i]
-                    if u >= 0 and stamp[u] == mark:
+                    if u >= 0 and flag[u] == 2 * mark:
                         continue
                     if n_b == work:
                         state[NEED] = n_b + 1
@@ -297,7 +304,7 @@ def _insert(X, order, tets, nbr, alive, stamp, seen, free, cavity, stack, bt, bf
             if n_cav == work:
                 state[NEED] = n_cav + 1
                 return GROW_WORK
-            stamp[bad] = mark
+            flag[bad] = 2 * mark
             cavity[n_cav] = bad
             n_cav += 1
             stack[0] = bad
@@ -337,8 +344,7 @@ def _insert(X, order, tets, nbr, alive, stamp, seen, free, cavity, stack, bt, bf
                 n_tets += 1
             tets[N, 0], tets[N, 1], tets[N, 2], tets[N, 3] = a, b, c, p
             alive[N] = True
-            stamp[N] = 0
-            seen[N] = 0
+            flag[N] = 0
             nbr[N, 3] = u
             if u >= 0:
                 nbr[u, q] = N
@@ -382,22 +388,19 @@ def _insert(X, order, tets, nbr, alive, stamp, seen, free, cavity, stack, bt, bf
 
 
 @jit
-def _grow_all(tets, nbr, alive, stamp, seen, free):
+def _grow_all(rec, alive, flag, free):
     """The tetrahedron arrays at twice their length (new slots: no neighbours, not alive)."""
-    m = tets.shape[0]
-    t2 = np.empty((2 * m, 4), dtype=np.int32)
-    t2[:m] = tets
-    n2 = np.full((2 * m, 4), -1, dtype=np.int32)
-    n2[:m] = nbr
+    m = rec.shape[0]
+    r2 = np.empty((2 * m, 8), dtype=np.int32)
+    r2[:m] = rec
+    r2[m:, 4:] = -1
     a2 = np.zeros(2 * m, dtype=np.bool_)
     a2[:m] = alive
-    s2 = np.zeros(2 * m, dtype=np.int32)
-    s2[:m] = stamp
-    z2 = np.zeros(2 * m, dtype=np.int32)
-    z2[:m] = seen
+    g2 = np.zeros(2 * m, dtype=np.int32)
+    g2[:m] = flag
     f2 = np.empty(2 * m, dtype=np.int32)
     f2[:m] = free
-    return t2, n2, a2, s2, z2, f2
+    return r2, a2, g2, f2
 
 
 def delaunay_tets(P, seed=0):
