@@ -9,7 +9,9 @@ Stages are resumable: an existing, complete store for the same input and setting
 finished tiles are not recomputed, and the output is rewritten from the stored results.
 """
 
+import collections
 import contextlib
+import functools
 import hashlib
 import json
 import logging
@@ -20,6 +22,7 @@ import sys
 import tempfile
 import time
 import uuid
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -689,7 +692,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if options.refines and target > 0 and 0 < n_removed == n - target:  # something to swap
             refined = _refine(ts, store_path, prefix, scheduler, workers, client, progress)
         stage("refine")
-        n_out, n_boundary = _write_output(ts, source, output, prefix, refined)
+        n_out, n_boundary = _write_output(ts, source, output, prefix, refined,
+                                          1 if scheduler == "synchronous" else workers, client)
         stage("output")
     finally:
         held.close()
@@ -810,28 +814,71 @@ def _kept(ts, tile, prefix, refined):
     return _keep(ts, tile, prefix, refined), ts.read_result(tile, "boundary")
 
 
-def _write_output(ts, source, output, prefix, refined=False):
+def _tile_records(store_path, tile, prefix, refined):
+    """What the output takes from one tile: its kept core points' ``(xyz, attrs, boundary)``
+    (None if it keeps none), read wherever this runs — a cluster worker, or a thread beside
+    the writer — so the client only compresses and writes."""
+    ts = TileStore.open(store_path)
+    keep, boundary = _kept(ts, tile, prefix, refined)
+    if not keep.any():
+        return None
+    xyz, _ = ts.core(tile)
+    return xyz[keep], {k: v[keep] for k, v in ts.attrs(tile).items()}, boundary[keep]
+
+
+#: tiles read ahead of the one being written, per worker (each a tile's kept records)
+READ_AHEAD = 2
+
+
+def _in_tile_order(func, args, n, workers, client):
+    """``func(*args(i))`` for ``i`` in ``0..n-1``, yielded in that order while later ones are
+    computed: on the cluster's workers, else in threads of this process (the tile store's
+    reads release the GIL), at most ``READ_AHEAD`` per worker ahead of the consumer."""
+    if client is not None:
+        ahead = READ_AHEAD * max(1, sum(client.nthreads().values()))
+        submit = functools.partial(client.submit, pure=False)
+        pool = None
+    else:
+        threads = max(1, int(workers or os.cpu_count() or 1))
+        ahead = READ_AHEAD * threads
+        pool = ThreadPoolExecutor(threads)
+        submit = pool.submit
+    try:
+        pending = collections.deque(submit(func, *args(i)) for i in range(min(ahead, n)))
+        for i in range(n):
+            fut = pending.popleft()
+            if i + ahead < n:
+                pending.append(submit(func, *args(i + ahead)))
+            yield fut.result()
+            del fut
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _write_output(ts, source, output, prefix, refined=False, workers=None, client=None):
     """Write the kept core points of every tile: the refined flags if ``refined``, else the
-    cut's. LAS/LAZ tile by tile, the other formats in input order at each point's rank
+    cut's. LAS/LAZ tile by tile (each tile's records read ahead, on the workers or in threads:
+    :func:`_in_tile_order`), the other formats in input order at each point's rank
     (:class:`.input_order.InputRanks`, :class:`~tiledsimplify.io.points_out.PointsAt`), in
     memory bounded by a tile."""
     n_out = n_boundary = 0
     if output.suffix.lower() in LAS_SUFFIXES:
         from ..io.las import LasOutput
+        path = str(ts.path)
         with LasOutput(output, source.template_header()) as out:
-            for i in range(ts.n_tiles):
-                keep, boundary = _kept(ts, i, prefix, refined)
-                if not keep.any():
+            for got in _in_tile_order(_tile_records, lambda i: (path, i, prefix, refined),
+                                      ts.n_tiles, workers, client):
+                if got is None:
                     continue
-                xyz, _ = ts.core(i)
-                attrs = {k: v[keep] for k, v in ts.attrs(i).items()}
-                k = int(keep.sum())
-                out.write(xyz[keep], attrs, {
-                    "sharp_edge": boundary[keep].astype(np.uint8),
+                xyz, attrs, boundary = got
+                k = len(xyz)
+                out.write(xyz, attrs, {
+                    "sharp_edge": boundary.astype(np.uint8),
                     "importance": np.full(k, np.nan),
                     "simplify_rank": np.full(k, -1, dtype=np.int64)})
                 n_out += k
-                n_boundary += int(boundary[keep].sum())
+                n_boundary += int(boundary.sum())
         return n_out, n_boundary
     # in input order, a tile at a time
     ranks = InputRanks(ts.n_total)
