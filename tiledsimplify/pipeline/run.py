@@ -858,14 +858,14 @@ def _in_tile_order(func, args, n, workers, client):
 
 def _write_output(ts, source, output, prefix, refined=False, workers=None, client=None):
     """Write the kept core points of every tile: the refined flags if ``refined``, else the
-    cut's. LAS/LAZ tile by tile (each tile's records read ahead, on the workers or in threads:
-    :func:`_in_tile_order`), the other formats in input order at each point's rank
+    cut's. LAS/LAZ tile by tile, the other formats in input order at each point's rank
     (:class:`.input_order.InputRanks`, :class:`~tiledsimplify.io.points_out.PointsAt`), in
-    memory bounded by a tile."""
+    memory bounded by a tile; either way the tiles' kept records are read ahead, on the
+    workers or in threads (:func:`_in_tile_order`)."""
     n_out = n_boundary = 0
+    path = str(ts.path)
     if output.suffix.lower() in LAS_SUFFIXES:
         from ..io.las import LasOutput
-        path = str(ts.path)
         with LasOutput(output, source.template_header()) as out:
             for got in _in_tile_order(_tile_records, lambda i: (path, i, prefix, refined),
                                       ts.n_tiles, workers, client):
@@ -882,18 +882,33 @@ def _write_output(ts, source, output, prefix, refined=False, workers=None, clien
         return n_out, n_boundary
     # in input order, a tile at a time
     ranks = InputRanks(ts.n_total)
-    for i in range(ts.n_tiles):
-        ranks.add(ts.core_index(i)[_keep(ts, i, prefix, refined)])
+    for index in _in_tile_order(_tile_kept_index, lambda i: (path, i, prefix, refined),
+                                ts.n_tiles, workers, client):
+        ranks.add(index)
     n_out = len(ranks)
     with PointsAt(output, n_out, OUTPUT_COLUMNS) as out:
-        for i in range(ts.n_tiles):
-            keep, boundary = _kept(ts, i, prefix, refined)
-            xyz, idx = ts.core(i)
-            nrm = ts.read_result(i, "normal")[keep]
-            out.write(ranks.rank(idx[keep]), xyz[keep], {
-                "sharp_edge": boundary[keep].astype(np.uint8),
+        for idx, xyz, boundary, nrm in _in_tile_order(
+                _tile_points, lambda i: (path, i, prefix, refined), ts.n_tiles, workers,
+                client):
+            out.write(ranks.rank(idx), xyz, {
+                "sharp_edge": boundary.astype(np.uint8),
                 "nx": nrm[:, 0], "ny": nrm[:, 1], "nz": nrm[:, 2]})
-            n_boundary += int(boundary[keep].sum())
+            n_boundary += int(boundary.sum())
     return n_out, n_boundary
+
+
+def _tile_kept_index(store_path, tile, prefix, refined):
+    """The input indices of a tile's kept core points (read where this runs)."""
+    ts = TileStore.open(store_path)
+    return ts.core_index(tile)[_keep(ts, tile, prefix, refined)]
+
+
+def _tile_points(store_path, tile, prefix, refined):
+    """A tile's kept core points for a non-LAS output: ``(index, xyz, boundary, normals)``
+    (read where this runs)."""
+    ts = TileStore.open(store_path)
+    keep, boundary = _kept(ts, tile, prefix, refined)
+    xyz, idx = ts.core(tile)
+    return idx[keep], xyz[keep], boundary[keep], ts.read_result(tile, "normal")[keep]
 
 
