@@ -400,6 +400,21 @@ def test_las_ingested_in_parts_by_the_workers_gives_the_same_output(data_dir, tm
         assert (tmp_path / f"{name}.laz").read_bytes() == (tmp_path / "one.laz").read_bytes()
 
 
+def test_npy_ingested_in_parts_gives_the_same_output(bunny, tmp_path, caplog, monkeypatch):
+    import importlib
+    run_module = importlib.import_module("tiledsimplify.pipeline.run")
+    X, path = bunny  # a plain (n, 3) NPY: memory-mapped, cut in parts
+    kw = dict(ratio=0.15, tile_points=1500, chunk_points=1000)
+    run(path, tmp_path / "one.npy", scheduler="synchronous", **kw)
+    monkeypatch.setattr(run_module, "INGEST_PART_POINTS", 2000)
+    monkeypatch.setattr(run_module, "INGEST_PARTS_FROM", 2)
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        run(path, tmp_path / "parts.npy", scheduler="processes", workers=2, **kw)
+    assert any(f"{-(-len(X) // 2000)} parts read at once" in r.getMessage()
+               for r in caplog.records)
+    assert (tmp_path / "parts.npy").read_bytes() == (tmp_path / "one.npy").read_bytes()
+
+
 def test_cli_run_with_config(bunny, tmp_path, caplog):
     X, path = bunny
     cfg = tmp_path / "c.toml"

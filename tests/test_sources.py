@@ -36,6 +36,27 @@ def test_chunked_equals_whole(tmp_path, cloud, suffix, kind):
     np.testing.assert_allclose(xyz, cloud, rtol=1e-15)
 
 
+def test_mapped_files_cut_in_parts_read_as_the_whole(tmp_path, cloud):
+    import pickle
+    np.save(tmp_path / "a.npy", cloud)
+    write_points(tmp_path / "b.ply", cloud, {"importance": np.arange(len(cloud), dtype=float)})
+    for name in ("a.npy", "b.ply"):
+        src = open_source(tmp_path / name, chunk_points=100)
+        whole = list(src.chunks())
+        parts = src.parts(250)  # two chunks a part
+        assert [(p.lo, p.hi) for p in parts] == [(0, 200), (200, 400), (400, 600), (600, 800),
+                                                 (800, 1000), (1000, 1003)]
+        got = [c for p in parts for c in pickle.loads(pickle.dumps(p))()]  # as a worker reads
+        assert [g[0] for g in got] == [w[0] for w in whole]
+        for (_, x1, _), (_, x2, _) in zip(whole, got):
+            np.testing.assert_array_equal(x1, x2)
+        assert len(pickle.dumps(parts[0])) < 2000  # the file's layout, not its points
+    np.save(tmp_path / "f.npy", np.asfortranarray(cloud))  # not mapped as rows: read here
+    assert open_source(tmp_path / "f.npy").parts(250) is None
+    write_points(tmp_path / "c.npy", cloud, {})  # our structured output: read whole
+    assert open_source(tmp_path / "c.npy").parts(250) is None
+
+
 def test_ascii_ply_and_plain_xyz(tmp_path, cloud, data_dir):
     lines = ["ply", "format ascii 1.0", f"element vertex {len(cloud)}", "property float x",
              "property float y", "property float z", "property uchar red", "element face 0",

@@ -33,14 +33,18 @@ def check_finite(xyz, start, files):
 
 
 class ArraySource:
-    """Chunks over an in-memory or memory-mapped (n, 3) array (same interface as LasSource)."""
+    """Chunks over an in-memory or memory-mapped (n, 3) array (same interface as LasSource).
+
+    Made by :func:`open_source` over a file it maps (``mapped``: how to map it again), it
+    also cuts itself into parts another process can read (:meth:`parts`)."""
 
     is_las = False
 
-    def __init__(self, xyz, chunk_points=1_000_000, files=()):
+    def __init__(self, xyz, chunk_points=1_000_000, files=(), mapped=None):
         self._xyz = xyz
         self.chunk_points = int(chunk_points)
         self.files = list(files)
+        self._mapped = mapped  # (path, offset, dtype, shape) of a memory-mapped file
 
     @property
     def count(self):
@@ -49,21 +53,66 @@ class ArraySource:
     def __len__(self):
         return self.count
 
+    @staticmethod
+    def _rows(arr, start, stop):
+        return np.ascontiguousarray(arr[start:stop, :3], dtype=np.float64)
+
     def chunks(self):
-        for start in range(0, self.count, self.chunk_points):
-            stop = min(start + self.chunk_points, self.count)
-            xyz = np.ascontiguousarray(self._xyz[start:stop, :3], dtype=np.float64)
-            yield start, check_finite(xyz, start, self.files), {}
+        yield from _array_chunks(self._rows, self._xyz, 0, self.count, self.chunk_points,
+                                 self.files)
+
+    def parts(self, max_points=None):
+        """Consecutive parts of at most ``max_points`` (whole chunks, at least one; None: one
+        part), each mapping the file again where it is read, so they pickle to other
+        processes; None if the points are not a mapped file (held in memory: read here)."""
+        if self._mapped is None:
+            return None
+        step = self.count if max_points is None else max(
+            1, int(max_points) // self.chunk_points) * self.chunk_points
+        cuts = [*range(0, self.count, max(step, 1)), self.count]
+        return [MappedPart(type(self), self._mapped, lo, hi, self.chunk_points, self.files)
+                for lo, hi in itertools.pairwise(cuts)]
+
+
+def _array_chunks(rows, arr, lo, hi, chunk_points, files):
+    """The chunks of ``arr`` (the mapped or held points) from point ``lo`` to ``hi - 1``, at
+    multiples of ``chunk_points``; ``rows(arr, start, stop)``: their float64 (m, 3) xyz."""
+    for start in range(lo, hi, chunk_points):
+        stop = min(start + chunk_points, hi)
+        xyz = rows(arr, start, stop)
+        yield start, check_finite(xyz, start, files), {}
 
 
 class ColumnsSource(ArraySource):
     """Chunks from a memory-mapped structured array with fields x, y, z (binary PLY)."""
 
+    @staticmethod
+    def _rows(arr, start, stop):
+        part = arr[start:stop]
+        return np.stack([part["x"], part["y"], part["z"]], axis=1).astype(np.float64)
+
+
+class MappedPart:
+    """Points ``lo`` to ``hi - 1`` of a memory-mapped NPY or binary PLY file, read as its
+    source's chunks; holds the file's path and layout, not its points, so it pickles."""
+
+    def __init__(self, kind, mapped, lo, hi, chunk_points, files):
+        self.kind, self.mapped = kind, mapped
+        self.lo, self.hi = int(lo), int(hi)
+        self.chunk_points = int(chunk_points)
+        self.files = list(files)
+
+    def __call__(self):
+        return self.chunks()
+
+    def __repr__(self):
+        return f"MappedPart({Path(self.mapped[0]).name}, points {self.lo}..{self.hi - 1})"
+
     def chunks(self):
-        for start in range(0, self.count, self.chunk_points):
-            part = self._xyz[start:start + self.chunk_points]
-            xyz = np.stack([part["x"], part["y"], part["z"]], axis=1).astype(np.float64)
-            yield start, check_finite(xyz, start, self.files), {}
+        path, offset, dtype, shape = self.mapped
+        arr = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=shape)
+        yield from _array_chunks(self.kind._rows, arr, self.lo, self.hi, self.chunk_points,
+                                 self.files)
 
 
 class TextSource:
@@ -171,7 +220,8 @@ def _ply_source(path, chunk_points):
         raise FileFormatError(f"{path}: the PLY vertex data is shorter than its header says "
                               f"({vertex.count} vertices); the file is truncated.")
     mm = np.memmap(path, dtype=dtype, mode="r", offset=body_start, shape=(vertex.count,))
-    return ColumnsSource(mm, chunk_points, files=[Path(path)])
+    return ColumnsSource(mm, chunk_points, files=[Path(path)],
+                         mapped=(str(path), body_start, dtype, (vertex.count,)))
 
 
 def _is_las_spec(spec):
@@ -203,9 +253,12 @@ def open_source(spec, chunk_points=1_000_000):
         return TextSource(p, chunk_points, skip_lines=skip, count=count, delimiter=delimiter)
     if suffix == ".npy":
         arr = np.load(p, mmap_mode="r")
+        mapped = None
         if arr.dtype.names:  # our own structured output
             arr = np.stack([arr["x"], arr["y"], arr["z"]], axis=1)
-        else:
-            arr = read_points(p) if arr.ndim != 2 or arr.shape[1] < 3 else arr
-        return ArraySource(arr, chunk_points, files=[p])
+        elif arr.ndim != 2 or arr.shape[1] < 3:
+            arr = read_points(p)
+        elif isinstance(arr, np.memmap) and arr.flags.c_contiguous:
+            mapped = (str(p), int(arr.offset), arr.dtype, arr.shape)
+        return ArraySource(arr, chunk_points, files=[p], mapped=mapped)
     return ArraySource(read_points(p), chunk_points, files=[p])

@@ -233,10 +233,10 @@ INGEST_PARTS_FROM = 4
 def _ingest_parts(source, n, scheduler, workers, client):
     """The parts of the input an ingest reads at once, one task each on the run's scheduler
     (:meth:`.TileStore.create`), or None to read it in this process: a source that cannot be
-    cut (text, NPY, PLY: only LAS/LAZ can), the synchronous scheduler, fewer than
-    :data:`INGEST_PARTS_FROM` worker threads. About four parts per worker thread, each of at
-    least :data:`INGEST_PART_POINTS`, within files (a LAZ file is read from any point by its
-    chunk table)."""
+    cut (text files and anything read whole; LAS/LAZ, plain NPY and binary PLY can), the
+    synchronous scheduler, fewer than :data:`INGEST_PARTS_FROM` worker threads. About four
+    parts per worker thread, each of at least :data:`INGEST_PART_POINTS`, within files (a LAZ
+    file is read from any point by its chunk table, NPY and PLY are mapped)."""
     if not hasattr(source, "parts") or (client is None and scheduler == "synchronous"):
         return None
     if client is not None:
@@ -246,7 +246,7 @@ def _ingest_parts(source, n, scheduler, workers, client):
     if slots < INGEST_PARTS_FROM:
         return None
     parts = source.parts(max(INGEST_PART_POINTS, math.ceil(n / (4 * slots))))
-    return parts if len(parts) > 1 else None
+    return parts if parts is not None and len(parts) > 1 else None
 
 
 def _parts_mapper(scheduler, workers, client, ingest):
