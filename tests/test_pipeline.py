@@ -415,6 +415,29 @@ def test_npy_ingested_in_parts_gives_the_same_output(bunny, tmp_path, caplog, mo
     assert (tmp_path / "parts.npy").read_bytes() == (tmp_path / "one.npy").read_bytes()
 
 
+@pytest.mark.parametrize("suffix", [".laz", ".las"])
+def test_las_output_of_a_non_las_input(bunny, tmp_path, suffix):
+    from scipy.spatial import cKDTree
+    X, path = bunny
+    kw = dict(ratio=0.15, tile_points=3000)
+    s = run(path, tmp_path / f"out{suffix}", **kw)
+    run(path, tmp_path / "out.npy", **kw)
+    las = laspy.read(tmp_path / f"out{suffix}")
+    assert (las.header.version.major, las.header.version.minor) == (1, 4)
+    assert las.header.point_format.id == 6 and len(las.points) == s.n_output
+    ref = np.load(tmp_path / "out.npy")  # the same kept points, in input order
+    got = np.c_[las.x, las.y, las.z]
+    scale = float(las.header.scales[0])
+    spacing = np.median(cKDTree(X).query(X, k=2)[0][:, 1])
+    assert 1e-4 * spacing < scale <= 1e-3 * spacing  # a power of ten
+    d, j = cKDTree(np.c_[ref["x"], ref["y"], ref["z"]]).query(got)
+    assert d.max() <= scale and np.array_equal(np.sort(j), np.arange(len(ref)))
+    np.testing.assert_array_equal(np.asarray(las["sharp_edge"]), ref["sharp_edge"][j])
+    assert int(np.asarray(las["sharp_edge"]).sum()) == s.n_boundary
+    assert (np.asarray(las.return_number) == 1).all()
+    assert (np.asarray(las["simplify_rank"]) == -1).all()
+
+
 def test_cli_run_with_config(bunny, tmp_path, caplog):
     X, path = bunny
     cfg = tmp_path / "c.toml"

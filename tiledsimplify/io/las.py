@@ -645,6 +645,31 @@ def _short(text, limit=60):
 # writing
 # --------------------------------------------------------------------------------------
 
+#: what a LAS output of a non-LAS input gives each point besides x, y, z and the added
+#: dimensions (every other dimension of point format 6 is 0)
+NEW_POINT_DEFAULTS = {"return_number": 1, "number_of_returns": 1}
+
+
+def new_header(lo, hi, spacing) -> laspy.LasHeader:
+    """A LAS 1.4 point format 6 header for points without a LAS origin (PLY, NPY, text).
+
+    Scales: the largest power of ten at most a thousandth of ``spacing`` (the quantisation
+    then moves a point by at most 0.0005 spacings), coarser only if the extent would not fit
+    int32 otherwise; offsets: ``lo``. No CRS (the input had none to give).
+    """
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    extent = float(np.max(hi - lo)) if lo.size else 0.0
+    fine = spacing * 1e-3 if np.isfinite(spacing) and spacing > 0 else max(extent, 1.0) * 1e-9
+    need = extent / (0.9 * _INT32.max)  # the extent must fit the int32 grid
+    scale = 10.0 ** np.floor(np.log10(max(fine, need, 1e-300)))
+    if scale < need:
+        scale *= 10.0
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = np.full(3, scale)
+    header.offsets = lo
+    return header
+
+
 def _as_params(dim) -> laspy.ExtraBytesParams:
     if isinstance(dim, laspy.ExtraBytesParams):
         return dim

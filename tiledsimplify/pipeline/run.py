@@ -479,9 +479,10 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         A LAS/LAZ file, a folder or glob of LAS/LAZ tiles (read as one cloud), or a PLY,
         XYZ/CSV/TXT or NPY file.
     output : str or Path
-        ``.las``/``.laz`` (LAS input only: keeps every dimension, scales, offsets and VLRs, and
-        adds ``sharp_edge``, ``importance``, ``simplify_rank``), or ``.ply``/``.npy``/``.xyz``/
-        ``.csv``.
+        ``.las``/``.laz`` (from LAS input it keeps every dimension, scales, offsets and VLRs;
+        from other input it is LAS 1.4 point format 6 at scales of a thousandth of the
+        spacing; both add ``sharp_edge``, ``importance``, ``simplify_rank``), or
+        ``.ply``/``.npy``/``.xyz``/``.csv``.
     ratio, count : exactly one — the fraction or number of points to keep overall.
     options : SimplifyOptions or dict, optional
         Core options. Mode ``"paper"`` finds one boundary threshold for all tiles in a
@@ -540,9 +541,6 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     if not 0.0 < float(floor) < 1.0:
         raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
                          f"first runs down to), got {floor!r}; the default is 0.5.")
-    if output.suffix.lower() in LAS_SUFFIXES and not source.is_las:
-        raise InputError(f"{output}: LAS/LAZ output needs LAS/LAZ input (it keeps the input's "
-                         "point records); write .ply, .npy, .xyz or .csv instead.")
     check_output(output, LAS_SUFFIXES)
     _check_room(output, target * _record_bytes(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
@@ -801,8 +799,8 @@ def _record_bytes(output, source):
     suffix = output.suffix.lower()
     if suffix == ".laz":
         return 0
-    if suffix in LAS_SUFFIXES:
-        return source.template_header().point_format.size
+    if suffix in LAS_SUFFIXES:  # a non-LAS input gets point format 6 (30 bytes) and 17 more
+        return source.template_header().point_format.size if source.is_las else 30 + 17
     return record_bytes(OUTPUT_COLUMNS)
 
 
@@ -865,14 +863,22 @@ def _write_output(ts, source, output, prefix, refined=False, workers=None, clien
     n_out = n_boundary = 0
     path = str(ts.path)
     if output.suffix.lower() in LAS_SUFFIXES:
-        from ..io.las import LasOutput
-        with LasOutput(output, source.template_header()) as out:
+        from ..io.las import NEW_POINT_DEFAULTS, LasOutput, new_header
+        if source.is_las:
+            template = source.template_header()
+        else:  # a new LAS 1.4 layout: the input had no point records to keep
+            lo, hi = ts.root_attrs["bounds"]
+            template = new_header(lo, hi, ts.spacing)
+        with LasOutput(output, template) as out:
             for got in _in_tile_order(_tile_records, lambda i: (path, i, prefix, refined),
                                       ts.n_tiles, workers, client):
                 if got is None:
                     continue
                 xyz, attrs, boundary = got
                 k = len(xyz)
+                if not source.is_las:
+                    attrs = {name: np.full(k, NEW_POINT_DEFAULTS.get(name, 0))
+                             for name in out.attribute_names}
                 out.write(xyz, attrs, {
                     "sharp_edge": boundary.astype(np.uint8),
                     "importance": np.full(k, np.nan),
