@@ -691,7 +691,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             refined = _refine(ts, store_path, prefix, scheduler, workers, client, progress)
         stage("refine")
         n_out, n_boundary = _write_output(ts, source, output, prefix, refined,
-                                          1 if scheduler == "synchronous" else workers, client)
+                                          0 if scheduler == "synchronous" else workers, client)
         stage("output")
     finally:
         held.close()
@@ -830,8 +830,13 @@ READ_AHEAD = 2
 
 def _in_tile_order(func, args, n, workers, client):
     """``func(*args(i))`` for ``i`` in ``0..n-1``, yielded in that order while later ones are
-    computed: on the cluster's workers, else in threads of this process (the tile store's
-    reads release the GIL), at most ``READ_AHEAD`` per worker ahead of the consumer."""
+    computed: on the cluster's workers, else in ``workers`` threads of this process (the tile
+    store's reads release the GIL; 0: in this thread, one after another), at most
+    ``READ_AHEAD`` per worker ahead of the consumer."""
+    if client is None and workers == 0:
+        for i in range(n):
+            yield func(*args(i))
+        return
     if client is not None:
         ahead = READ_AHEAD * max(1, sum(client.nthreads().values()))
         submit = functools.partial(client.submit, pure=False)
