@@ -240,3 +240,40 @@ def test_cold_workers_compile_once_a_machine_while_the_input_is_read(bunny, tmp_
     assert any(cache.rglob("*.nbi"))
     run(path, tmp_path / "warm.npy", ratio=0.2, tile_points=3000, workers=2)
     assert (tmp_path / "cold.npy").read_bytes() == (tmp_path / "warm.npy").read_bytes()
+
+
+def test_an_input_the_workers_cannot_read_is_ingested_by_the_client(tmp_path, caplog):
+    from tiledsimplify.io.sources import open_source
+    run_module = importlib.import_module("tiledsimplify.pipeline.run")
+    X = np.random.default_rng(0).random((5000, 3))
+    np.save(tmp_path / "a.npy", X)
+    src = open_source(tmp_path / "a.npy", chunk_points=500)
+    size = (tmp_path / "a.npy").stat().st_size
+    path = str((tmp_path / "a.npy").absolute())
+    # what a worker answers: a file it reads as the client does, one of another size, none
+    assert W.unreadable([(path, size)]) == []
+    assert W.unreadable([(path, size + 1), (path + ".gone", 3)]) == [path, path + ".gone"]
+
+    class Client:  # two workers of 2 threads; the second cannot read the input
+        def __init__(self, blind):
+            self.blind = blind
+
+        def nthreads(self):
+            return {"tcp://a:1": 2, "tcp://b:2": 2}
+
+        def run(self, func, files):
+            return {"tcp://a:1": func(files),
+                    "tcp://b:2": func([(p + ".elsewhere", s) for p, s in files]
+                                      if self.blind else files)}
+
+    old = run_module.INGEST_PART_POINTS
+    run_module.INGEST_PART_POINTS = 500
+    try:
+        parts = run_module._ingest_parts(src, 5000, None, None, Client(blind=False))
+        assert len(parts) == 10 and parts[0].mapped[0] == path
+        with caplog.at_level("INFO", logger="tiledsimplify"):
+            assert run_module._ingest_parts(src, 5000, None, None, Client(blind=True)) is None
+    finally:
+        run_module.INGEST_PART_POINTS = old
+    assert any("ingest in this client: 1 of 2 dask workers cannot read the input" in
+               r.getMessage() and "tcp://b:2" in r.getMessage() for r in caplog.records)

@@ -609,8 +609,8 @@ class LasSource:
             count = info.point_count
             cuts = [*range(0, count, step or max(count, 1)), count]
             for lo, hi in itertools.pairwise(cuts):
-                out.append(LasPart(info.path, (info.header.point_format.size, count), first,
-                                   lo, hi, self.chunk_points, self._attribute_names))
+                out.append(LasPart(info.path.absolute(), (info.header.point_format.size, count),
+                                   first, lo, hi, self.chunk_points, self._attribute_names))
             first += count
         return out
 

@@ -221,7 +221,8 @@ def _ply_source(path, chunk_points):
                               f"({vertex.count} vertices); the file is truncated.")
     mm = np.memmap(path, dtype=dtype, mode="r", offset=body_start, shape=(vertex.count,))
     return ColumnsSource(mm, chunk_points, files=[Path(path)],
-                         mapped=(str(path), body_start, dtype, (vertex.count,)))
+                         mapped=(str(Path(path).absolute()), body_start, dtype,
+                                 (vertex.count,)))
 
 
 def _is_las_spec(spec):
@@ -259,6 +260,6 @@ def open_source(spec, chunk_points=1_000_000):
         elif arr.ndim != 2 or arr.shape[1] < 3:
             arr = read_points(p)
         elif isinstance(arr, np.memmap) and arr.flags.c_contiguous:
-            mapped = (str(p), int(arr.offset), arr.dtype, arr.shape)
+            mapped = (str(p.absolute()), int(arr.offset), arr.dtype, arr.shape)
         return ArraySource(arr, chunk_points, files=[p], mapped=mapped)
     return ArraySource(read_points(p), chunk_points, files=[p])

@@ -48,7 +48,7 @@ from .tile_task import (
     simplify_tile,
     threshold_from_histogram,
 )
-from .workers import check_workers, killed_message
+from .workers import check_workers, input_unreadable, killed_message
 
 log = logging.getLogger("tiledsimplify")
 
@@ -234,7 +234,8 @@ def _ingest_parts(source, n, scheduler, workers, client):
     """The parts of the input an ingest reads at once, one task each on the run's scheduler
     (:meth:`.TileStore.create`), or None to read it in this process: a source that cannot be
     cut (text files and anything read whole; LAS/LAZ, plain NPY and binary PLY can), the
-    synchronous scheduler, fewer than :data:`INGEST_PARTS_FROM` worker threads. About four
+    synchronous scheduler, fewer than :data:`INGEST_PARTS_FROM` worker threads, cluster
+    workers that cannot read the input files as the client does. About four
     parts per worker thread, each of at least :data:`INGEST_PART_POINTS`, within files (a LAZ
     file is read from any point by its chunk table, NPY and PLY are mapped)."""
     if not hasattr(source, "parts") or (client is None and scheduler == "synchronous"):
@@ -246,7 +247,14 @@ def _ingest_parts(source, n, scheduler, workers, client):
     if slots < INGEST_PARTS_FROM:
         return None
     parts = source.parts(max(INGEST_PART_POINTS, math.ceil(n / (4 * slots))))
-    return parts if parts is not None and len(parts) > 1 else None
+    if parts is None or len(parts) < 2:
+        return None
+    if client is not None:
+        why = input_unreadable(client, source.files)
+        if why:
+            log.info("ingest in this client: %s", why)
+            return None
+    return parts
 
 
 def _parts_mapper(scheduler, workers, client, ingest):

@@ -212,3 +212,33 @@ def check_workers(client, directory, *, temporary: bool, tile_points: int | None
         _memory_warning(info, tile_points)
     _warm_cold_machines(client, replies, info)
     return n
+
+
+def unreadable(files) -> list[str]:
+    """Run on a worker: those of ``files`` (``(path, size)`` as the client sees them) that it
+    cannot read, or sees with another size (another file under the same path)."""
+    bad = []
+    for path, size in files:
+        try:
+            ok = os.stat(path).st_size == size and os.access(path, os.R_OK)
+        except OSError:
+            ok = False
+        if not ok:
+            bad.append(path)
+    return bad
+
+
+def input_unreadable(client, paths) -> str:
+    """Why the workers cannot read the input themselves ('' if every worker reads every file
+    in ``paths`` as this client does): an ingest in parts runs on them, and an input on the
+    client's own disk is then read by the client instead."""
+    files = [(str(Path(p).absolute()), os.stat(p).st_size) for p in paths]
+    if not files:
+        return "no input files to name"
+    replies = client.run(unreadable, files)
+    bad = {worker: paths for worker, paths in replies.items() if paths}
+    if not bad:
+        return ""
+    worker, paths = next(iter(bad.items()))
+    return (f"{len(bad)} of {len(replies)} dask workers cannot read the input as this client "
+            f"does ({worker}: {paths[0]}{f' and {len(paths) - 1} more' if len(paths) > 1 else ''})")
