@@ -36,11 +36,14 @@ def test_chunked_equals_whole(tmp_path, cloud, suffix, kind):
     np.testing.assert_allclose(xyz, cloud, rtol=1e-15)
 
 
-def test_mapped_files_cut_in_parts_read_as_the_whole(tmp_path, cloud):
+def test_files_cut_in_parts_read_as_the_whole(tmp_path, cloud):
     import pickle
     np.save(tmp_path / "a.npy", cloud)
     write_points(tmp_path / "b.ply", cloud, {"importance": np.arange(len(cloud), dtype=float)})
-    for name in ("a.npy", "b.ply"):
+    write_points(tmp_path / "c.xyz", cloud)  # a header line, then a line a point
+    write_points(tmp_path / "d.csv", cloud)
+    (tmp_path / "e.txt").write_bytes(b"".join(b"%.17g %.17g %.17g\r\n" % tuple(p) for p in cloud))
+    for name in ("a.npy", "b.ply", "c.xyz", "d.csv", "e.txt"):
         src = open_source(tmp_path / name, chunk_points=100)
         whole = list(src.chunks())
         parts = src.parts(250)  # two chunks a part
@@ -67,6 +70,8 @@ def test_ascii_ply_and_plain_xyz(tmp_path, cloud, data_dir):
     src, xyz = _chunked(path, 333)
     assert isinstance(src, TextSource)
     np.testing.assert_array_equal(xyz, read_points(path))
+    got = np.concatenate([c[1] for p in src.parts(700) for c in p()])  # 2 chunks a part
+    np.testing.assert_array_equal(got, xyz)  # from inside the vertex block, header skipped
     plain = tmp_path / "p.xyz"
     np.savetxt(plain, cloud)  # no header, no trailing delimiter
     _, xyz = _chunked(plain, 1000)

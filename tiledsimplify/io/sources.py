@@ -6,6 +6,7 @@ parsed a chunk of lines at a time. Memory is bounded by the chunk size in all th
 Compressed (``.gz``) point files and meshes (OBJ/OFF/STL) are read whole.
 """
 
+import io
 import itertools
 from pathlib import Path
 
@@ -135,29 +136,87 @@ class TextSource:
         return self._count
 
     def chunks(self):
-        path = self.files[0]
-        start = 0
-        with open(path, "r", encoding="ascii", errors="replace") as fh:
-            for _ in range(self._skip):
-                fh.readline()
-            while start < self._count:
-                m = min(self.chunk_points, self._count - start)
+        for part in self.parts():
+            yield from part.chunks()
+
+    def parts(self, max_points=None):
+        """Consecutive parts of at most ``max_points`` lines (whole chunks, at least one;
+        None: one part), each starting at the byte offset of its first line (found by one
+        scan of the file), so they pickle and read independently."""
+        step = self._count if max_points is None else max(
+            1, int(max_points) // self.chunk_points) * self.chunk_points
+        cuts = [*range(0, self._count, max(step, 1)), self._count]
+        path = self.files[0].absolute()
+        offsets = _line_offsets(path, [self._skip + lo for lo in cuts[:-1]])
+        return [TextPart(path, off, lo, hi, self.chunk_points, self._skip, self._delimiter,
+                         self._count)
+                for off, (lo, hi) in zip(offsets, itertools.pairwise(cuts))]
+
+
+def _line_offsets(path, lines):
+    """Byte offsets in ``path`` of the starts of ``lines`` (0-based, ascending): line ``L``
+    starts after the ``L``-th newline (the end if the file has fewer)."""
+    out = []
+    pending = list(lines)
+    seen = pos = 0  # newlines and bytes before the current block
+    with open(path, "rb") as fh:
+        while pending and pending[0] == 0:
+            out.append(0)
+            pending.pop(0)
+        while pending:
+            block = fh.read(1 << 22)
+            if not block:
+                break
+            nl = block.count(b"\n")
+            if pending[0] <= seen + nl:
+                where = np.flatnonzero(np.frombuffer(block, dtype=np.uint8) == 10)
+                while pending and pending[0] <= seen + nl:
+                    out.append(pos + int(where[pending.pop(0) - seen - 1]) + 1)
+            seen += nl
+            pos += len(block)
+    return out + [pos] * len(pending)
+
+
+class TextPart:
+    """Points ``lo`` to ``hi - 1`` of a text point file, read as its :class:`TextSource`'s
+    chunks from byte ``offset``, where line ``skip + lo`` starts (``skip``: the header's lines,
+    for the line numbers of errors); pickles."""
+
+    def __init__(self, path, offset, lo, hi, chunk_points, skip, delimiter, count):
+        self.path, self.offset = Path(path), int(offset)
+        self.lo, self.hi = int(lo), int(hi)
+        self.chunk_points, self.skip = int(chunk_points), int(skip)
+        self.delimiter, self.count = delimiter, int(count)
+
+    def __call__(self):
+        return self.chunks()
+
+    def __repr__(self):
+        return f"TextPart({self.path.name}, points {self.lo}..{self.hi - 1})"
+
+    def chunks(self):
+        path, start = self.path, self.lo
+        with open(path, "rb") as raw:
+            raw.seek(self.offset)
+            fh = io.TextIOWrapper(raw, encoding="ascii", errors="replace")
+            while start < self.hi:
+                m = min(self.chunk_points, self.hi - start)
                 lines = list(itertools.islice(fh, m))
                 if len(lines) < m:
-                    raise FileFormatError(f"{path}: expected {self._count} points but the file "
+                    raise FileFormatError(f"{path}: expected {self.count} points but the file "
                                           f"ends after {start + len(lines)}; it is truncated.")
                 try:
-                    xyz = np.loadtxt(lines, delimiter=self._delimiter, usecols=(0, 1, 2),
+                    xyz = np.loadtxt(lines, delimiter=self.delimiter, usecols=(0, 1, 2),
                                      dtype=np.float64, ndmin=2)
                 except ValueError as exc:
-                    i, text, why = _first_bad_line(lines, self._delimiter)
-                    where = (f"line {self._skip + start + i + 1} (point {start + i}): "
+                    i, text, why = _first_bad_line(lines, self.delimiter)
+                    where = (f"line {self.skip + start + i + 1} (point {start + i}): "
                              f"{text.strip()[:80]!r} ({why})" if i is not None
                              else f"the block of points from {start} ({exc})")
                     raise FileFormatError(f"{path}: unreadable point line at {where}; "
                                           "each line needs three numbers x y z; fix or remove "
                                           "it.") from None
-                yield start, check_finite(xyz, start, self.files), {}
+                yield start, check_finite(xyz, start, [path]), {}
                 start += m
 
 

@@ -233,11 +233,11 @@ INGEST_PARTS_FROM = 4
 def _ingest_parts(source, n, scheduler, workers, client):
     """The parts of the input an ingest reads at once, one task each on the run's scheduler
     (:meth:`.TileStore.create`), or None to read it in this process: a source that cannot be
-    cut (text files and anything read whole; LAS/LAZ, plain NPY and binary PLY can), the
-    synchronous scheduler, fewer than :data:`INGEST_PARTS_FROM` worker threads, cluster
-    workers that cannot read the input files as the client does. About four
-    parts per worker thread, each of at least :data:`INGEST_PART_POINTS`, within files (a LAZ
-    file is read from any point by its chunk table, NPY and PLY are mapped)."""
+    cut (anything read whole: gzipped files, meshes, structured NPY), the synchronous
+    scheduler, fewer than :data:`INGEST_PARTS_FROM` worker threads, cluster workers that cannot
+    read the input files as the client does. About four parts per worker thread, each of at
+    least :data:`INGEST_PART_POINTS`, within files (a LAZ file is read from any point by its
+    chunk table, NPY and binary PLY are mapped, text is read from a line's byte offset)."""
     if not hasattr(source, "parts") or (client is None and scheduler == "synchronous"):
         return None
     if client is not None:
