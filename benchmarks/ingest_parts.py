@@ -13,6 +13,7 @@ with the wall time, this process's CPU seconds and the workers' CPU seconds (the
 ``getrusage`` before and after), and checks that both stores hold the same tiles.
 
     python benchmarks/ingest_parts.py scan3m.laz [--workers 2] [--part-points 1000000]
+    python benchmarks/ingest_parts.py cloud.xyz --chunk-points 250000 --part-points 250000
 """
 
 import argparse
@@ -40,6 +41,7 @@ def main(argv=None):
     ap.add_argument("input", help="a LAS/LAZ file, folder or glob")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--part-points", type=int, default=1_000_000)
+    ap.add_argument("--chunk-points", type=int, default=1_000_000)
     ap.add_argument("--tile-points", type=int, default=375_000)
     ap.add_argument("--rounds", type=int, default=2)
     args = ap.parse_args(argv)
@@ -49,7 +51,7 @@ def main(argv=None):
     from tiledsimplify.io.sources import open_source
     from tiledsimplify.tiles import TileStore
 
-    src = open_source(args.input)
+    src = open_source(args.input, chunk_points=args.chunk_points)
     parts = src.parts(args.part_points)
     kw = {"tile_points": args.tile_points, "config": {}, "provenance": {},
           "n_total": src.count}
