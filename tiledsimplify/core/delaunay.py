@@ -153,9 +153,9 @@ def _build(X, order, n_real, cap, work):
 
     A tetrahedron's corners and neighbours share one 32-byte record (``tets`` and ``nbr`` are
     views of it), and one array tells whether it is in the cavity or was tested outside it:
-    the cavity search reads both for each neighbour it meets, a cache miss each when they
-    were four arrays. Build 0.91x the time (median of 8 alternating pairs, 0.75-1.0, 100k
-    scan points; the same tetrahedra).
+    the cavity search reads both for each neighbour it meets, from four arrays before (the
+    lines with the most perf samples). Build 0.91x the time (median of 8 alternating pairs,
+    0.75-1.0, 100k scan points; the same tetrahedra).
     """
     rec = np.empty((cap, 8), dtype=np.int32)  # int32: half the memory traffic of int64
     rec[:, 4:] = -1

@@ -359,6 +359,15 @@ def _read_info(path: Path) -> LasFileInfo:
 # reading
 # --------------------------------------------------------------------------------------
 
+def part_ranges(count, max_points, chunk_points):
+    """``(lo, hi)`` of consecutive parts of ``count`` points: at most ``max_points`` each,
+    rounded down to whole chunks of ``chunk_points`` and at least one chunk, so that a part's
+    chunks are the whole input's; one part if ``max_points`` is None, none if ``count`` is
+    0. Every chunked source cuts itself with this (``parts``)."""
+    step = count if max_points is None else max(1, int(max_points) // chunk_points) * chunk_points
+    return list(itertools.pairwise([*range(0, count, max(step, 1)), count]))
+
+
 class LasPart:
     """Points ``lo`` to ``hi - 1`` of one file of a :class:`LasSource`, read as its chunks
     (global start indices, the source's attribute names) — :meth:`LasSource.parts`. Holds
@@ -382,8 +391,6 @@ class LasPart:
     def chunks(self) -> Iterator[tuple[int, np.ndarray, dict]]:
         """This part's chunks, as :meth:`LasSource.chunks` gives them."""
         path = self.path
-        if self.hi <= self.lo:
-            return
         with _open_reader(path) as reader:
             header = reader.header
             if (header.point_format.size, int(header.point_count)) != self.expect:
@@ -601,14 +608,10 @@ class LasSource:
         Their chunks, part after part, are :meth:`chunks`'s; each part opens its file itself
         and pickles, so parts can be read at once by threads, processes or cluster workers
         (a parallel ingest, :meth:`.TileStore.create`)."""
-        step = None
-        if max_points is not None:
-            step = max(1, int(max_points) // self.chunk_points) * self.chunk_points
         out, first = [], 0
         for info in self.infos:
             count = info.point_count
-            cuts = [*range(0, count, step or max(count, 1)), count]
-            for lo, hi in itertools.pairwise(cuts):
+            for lo, hi in part_ranges(count, max_points, self.chunk_points):
                 out.append(LasPart(info.path.absolute(), (info.header.point_format.size, count),
                                    first, lo, hi, self.chunk_points, self._attribute_names))
             first += count

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileFormatError, InputError
-from .las import LasSource, las_files
+from .las import LasSource, las_files, part_ranges
 from .mesh import _PLY_TYPES, _parse_ply_header, read_points
 
 TEXT_SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".asc")
@@ -68,11 +68,8 @@ class ArraySource:
         processes; None if the points are not a mapped file (held in memory: read here)."""
         if self._mapped is None:
             return None
-        step = self.count if max_points is None else max(
-            1, int(max_points) // self.chunk_points) * self.chunk_points
-        cuts = [*range(0, self.count, max(step, 1)), self.count]
         return [MappedPart(type(self), self._mapped, lo, hi, self.chunk_points, self.files)
-                for lo, hi in itertools.pairwise(cuts)]
+                for lo, hi in part_ranges(self.count, max_points, self.chunk_points)]
 
 
 def _array_chunks(rows, arr, lo, hi, chunk_points, files):
@@ -117,16 +114,20 @@ class MappedPart:
 
 
 class TextSource:
-    """Chunks of an ASCII point file (XYZ/CSV/TXT, or the vertex block of an ASCII PLY)."""
+    """Chunks of an ASCII point file (XYZ/CSV/TXT, or the vertex block of an ASCII PLY).
+
+    ``offsets[k]``: the byte where chunk ``k``'s first line starts (found by the scan that
+    opened the file, :func:`_scan_lines`), so a part starts reading there."""
 
     is_las = False
 
-    def __init__(self, path, chunk_points, *, skip_lines, count, delimiter):
+    def __init__(self, path, chunk_points, *, skip_lines, count, delimiter, offsets):
         self.files = [Path(path)]
         self.chunk_points = int(chunk_points)
         self._skip = skip_lines
         self._count = int(count)
         self._delimiter = delimiter
+        self._offsets = list(offsets)
 
     @property
     def count(self):
@@ -141,40 +142,45 @@ class TextSource:
 
     def parts(self, max_points=None):
         """Consecutive parts of at most ``max_points`` lines (whole chunks, at least one;
-        None: one part), each starting at the byte offset of its first line (found by one
-        scan of the file), so they pickle and read independently."""
-        step = self._count if max_points is None else max(
-            1, int(max_points) // self.chunk_points) * self.chunk_points
-        cuts = [*range(0, self._count, max(step, 1)), self._count]
+        None: one part), each reading from the byte offset of its first line, so they pickle
+        and read independently."""
         path = self.files[0].absolute()
-        offsets = _line_offsets(path, [self._skip + lo for lo in cuts[:-1]])
-        return [TextPart(path, off, lo, hi, self.chunk_points, self._skip, self._delimiter,
-                         self._count)
-                for off, (lo, hi) in zip(offsets, itertools.pairwise(cuts))]
+        return [TextPart(path, self._offsets[lo // self.chunk_points], lo, hi,
+                         self.chunk_points, self._skip, self._delimiter, self._count)
+                for lo, hi in part_ranges(self._count, max_points, self.chunk_points)]
 
 
-def _line_offsets(path, lines):
-    """Byte offsets in ``path`` of the starts of ``lines`` (0-based, ascending): line ``L``
-    starts after the ``L``-th newline (the end if the file has fewer)."""
-    out = []
-    pending = list(lines)
+def _scan_lines(path, first, every, count):
+    """One pass over ``path``: ``(newlines, last byte, offsets)``, ``offsets[k]`` the byte where
+    line ``first + k * every`` starts (line ``L`` starts after the ``L``-th newline) for the
+    ``ceil(count / every)`` chunks of ``count`` lines from line ``first`` — the file's size
+    where it is shorter (a truncated file then fails where it is read). Stops reading once
+    those are found if ``count`` is known, else (None) reads to the end, counting newlines
+    for all chunk starts found."""
+    need = None if count is None else -(-count // every)
+    offsets = []
+    target = first  # the next line whose start is wanted
     seen = pos = 0  # newlines and bytes before the current block
+    last = b""
     with open(path, "rb") as fh:
-        while pending and pending[0] == 0:
-            out.append(0)
-            pending.pop(0)
-        while pending:
-            block = fh.read(1 << 22)
-            if not block:
+        if target == 0:
+            offsets.append(0)
+            target += every
+        for block in iter(lambda: fh.read(1 << 22), b""):
+            if need is not None and len(offsets) >= need:
                 break
             nl = block.count(b"\n")
-            if pending[0] <= seen + nl:
+            if target <= seen + nl:
                 where = np.flatnonzero(np.frombuffer(block, dtype=np.uint8) == 10)
-                while pending and pending[0] <= seen + nl:
-                    out.append(pos + int(where[pending.pop(0) - seen - 1]) + 1)
+                while target <= seen + nl:
+                    offsets.append(pos + int(where[target - seen - 1]) + 1)
+                    target += every
             seen += nl
             pos += len(block)
-    return out + [pos] * len(pending)
+            last = block[-1:]
+    if need is not None:
+        offsets = offsets[:need] + [pos] * (need - len(offsets))
+    return seen, last, offsets
 
 
 class TextPart:
@@ -231,17 +237,11 @@ def _first_bad_line(lines, delimiter):
     return None, None, None
 
 
-def _text_layout(path):
-    """(lines to skip, number of points, delimiter) of an XYZ/CSV/TXT file."""
+def _text_layout(path, chunk_points):
+    """(lines to skip, number of points, delimiter, chunk offsets) of an XYZ/CSV/TXT file, by
+    one scan (:func:`_scan_lines`)."""
     with open(path, "rb") as fh:
         first = fh.readline()
-        fh.seek(0)
-        n_lines, last = 0, b""
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            n_lines += block.count(b"\n")
-            last = block[-1:]
-    if last not in (b"", b"\n"):
-        n_lines += 1  # a last line without a newline
     line = first.decode("ascii", errors="replace")
     delimiter = "," if "," in line else None
     tokens = line.replace(",", " ").split()
@@ -250,7 +250,12 @@ def _text_layout(path):
         header = len(tokens) < 3
     except ValueError:
         header = True
-    return int(header), n_lines - int(header), delimiter
+    skip = int(header)
+    n_lines, last, offsets = _scan_lines(path, skip, chunk_points, None)
+    if last not in (b"", b"\n"):
+        n_lines += 1  # a last line without a newline
+    count = n_lines - skip
+    return skip, count, delimiter, offsets[:-(-count // chunk_points)]
 
 
 def _ply_source(path, chunk_points):
@@ -270,8 +275,9 @@ def _ply_source(path, chunk_points):
         names = [p.name for p in vertex.props]
         if names[:3] != ["x", "y", "z"]:
             return None
+        offsets = _scan_lines(path, header_lines, chunk_points, vertex.count)[2]
         return TextSource(path, chunk_points, skip_lines=header_lines, count=vertex.count,
-                          delimiter=None)
+                          delimiter=None, offsets=offsets)
     endian = "<" if fmt == "binary_little_endian" else ">"
     dtype = np.dtype([(p.name, endian + _PLY_TYPES.get(p.code, p.code)) for p in vertex.props])
     size = Path(path).stat().st_size
@@ -309,8 +315,9 @@ def open_source(spec, chunk_points=1_000_000):
         if src is not None:
             return src
     if suffix in TEXT_SUFFIXES:
-        skip, count, delimiter = _text_layout(p)
-        return TextSource(p, chunk_points, skip_lines=skip, count=count, delimiter=delimiter)
+        skip, count, delimiter, offsets = _text_layout(p, chunk_points)
+        return TextSource(p, chunk_points, skip_lines=skip, count=count, delimiter=delimiter,
+                          offsets=offsets)
     if suffix == ".npy":
         arr = np.load(p, mmap_mode="r")
         mapped = None

@@ -11,7 +11,6 @@ finished tiles are not recomputed, and the output is rewritten from the stored r
 
 import collections
 import contextlib
-import functools
 import hashlib
 import json
 import logging
@@ -22,7 +21,6 @@ import sys
 import tempfile
 import time
 import uuid
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -225,7 +223,7 @@ class _IngestProgress:
 #: a parallel ingest cuts the input in parts of at least this many points (whole chunks)
 INGEST_PART_POINTS = 1_000_000
 #: ... and only with at least this many worker threads: an ingest in this process already
-#: keeps ~1.3 cores busy (LAZ decompression and chunk compression run in threads), and on 2
+#: keeps 1.1-1.3 cores busy (LAZ decompression and chunk compression run in threads), and on 2
 #: cores 3 parts at once took as long (2026-12-03, docs/measurements.md "Ingest in parts")
 INGEST_PARTS_FROM = 4
 
@@ -698,8 +696,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if options.refines and target > 0 and 0 < n_removed == n - target:  # something to swap
             refined = _refine(ts, store_path, prefix, scheduler, workers, client, progress)
         stage("refine")
-        n_out, n_boundary = _write_output(ts, source, output, prefix, refined,
-                                          0 if scheduler == "synchronous" else workers, client)
+        n_out, n_boundary = _write_output(ts, source, output, prefix, refined, client)
         stage("output")
     finally:
         held.close()
@@ -822,8 +819,8 @@ def _kept(ts, tile, prefix, refined):
 
 def _tile_records(store_path, tile, prefix, refined):
     """What the output takes from one tile: its kept core points' ``(xyz, attrs, boundary)``
-    (None if it keeps none), read wherever this runs — a cluster worker, or a thread beside
-    the writer — so the client only compresses and writes."""
+    (None if it keeps none), read wherever this runs (a cluster worker: the client then only
+    compresses and writes)."""
     ts = TileStore.open(store_path)
     keep, boundary = _kept(ts, tile, prefix, refined)
     if not keep.any():
@@ -836,44 +833,32 @@ def _tile_records(store_path, tile, prefix, refined):
 READ_AHEAD = 2
 
 
-def _in_tile_order(func, args, n, workers, client):
-    """``func(*args(i))`` for ``i`` in ``0..n-1``, yielded in that order while later ones are
-    computed: on the cluster's workers, else in ``workers`` threads of this process (0: in
-    this thread, one after another), at most ``READ_AHEAD`` per worker ahead of the consumer.
-    On a cluster the client then only writes; threads here gained nothing measurable on 2
-    cores (zarr's reads go through one event loop)."""
-    if client is None and workers == 0:
+def _in_tile_order(func, args, n, client):
+    """``func(*args(i))`` for ``i`` in ``0..n-1``, yielded in that order: on a cluster computed
+    by its workers, at most ``READ_AHEAD`` per worker ahead of the consumer, so the client only
+    writes; else here, one after another (read ahead in threads here, the output stage of the
+    3M-point scan was within noise of this: zarr's reads go through one event loop)."""
+    if client is None:
         for i in range(n):
             yield func(*args(i))
         return
-    if client is not None:
-        ahead = READ_AHEAD * max(1, sum(client.nthreads().values()))
-        submit = functools.partial(client.submit, pure=False)
-        pool = None
-    else:
-        threads = max(1, int(workers or os.cpu_count() or 1))
-        ahead = READ_AHEAD * threads
-        pool = ThreadPoolExecutor(threads)
-        submit = pool.submit
-    try:
-        pending = collections.deque(submit(func, *args(i)) for i in range(min(ahead, n)))
-        for i in range(n):
-            fut = pending.popleft()
-            if i + ahead < n:
-                pending.append(submit(func, *args(i + ahead)))
-            yield fut.result()
-            del fut
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+    ahead = READ_AHEAD * max(1, sum(client.nthreads().values()))
+    pending = collections.deque(client.submit(func, *args(i), pure=False)
+                                for i in range(min(ahead, n)))
+    for i in range(n):
+        fut = pending.popleft()
+        if i + ahead < n:
+            pending.append(client.submit(func, *args(i + ahead), pure=False))
+        yield fut.result()
+        del fut
 
 
-def _write_output(ts, source, output, prefix, refined=False, workers=None, client=None):
+def _write_output(ts, source, output, prefix, refined=False, client=None):
     """Write the kept core points of every tile: the refined flags if ``refined``, else the
     cut's. LAS/LAZ tile by tile, the other formats in input order at each point's rank
     (:class:`.input_order.InputRanks`, :class:`~tiledsimplify.io.points_out.PointsAt`), in
-    memory bounded by a tile; either way the tiles' kept records are read ahead, on the
-    workers or in threads (:func:`_in_tile_order`)."""
+    memory bounded by a tile; on a cluster the tiles' kept records are read ahead by its
+    workers (:func:`_in_tile_order`)."""
     n_out = n_boundary = 0
     path = str(ts.path)
     if output.suffix.lower() in LAS_SUFFIXES:
@@ -885,7 +870,7 @@ def _write_output(ts, source, output, prefix, refined=False, workers=None, clien
             template = new_header(lo, hi, ts.spacing)
         with LasOutput(output, template) as out:
             for got in _in_tile_order(_tile_records, lambda i: (path, i, prefix, refined),
-                                      ts.n_tiles, workers, client):
+                                      ts.n_tiles, client):
                 if got is None:
                     continue
                 xyz, attrs, boundary = got
@@ -903,13 +888,12 @@ def _write_output(ts, source, output, prefix, refined=False, workers=None, clien
     # in input order, a tile at a time
     ranks = InputRanks(ts.n_total)
     for index in _in_tile_order(_tile_kept_index, lambda i: (path, i, prefix, refined),
-                                ts.n_tiles, workers, client):
+                                ts.n_tiles, client):
         ranks.add(index)
     n_out = len(ranks)
     with PointsAt(output, n_out, OUTPUT_COLUMNS) as out:
         for idx, xyz, boundary, nrm in _in_tile_order(
-                _tile_points, lambda i: (path, i, prefix, refined), ts.n_tiles, workers,
-                client):
+                _tile_points, lambda i: (path, i, prefix, refined), ts.n_tiles, client):
             out.write(ranks.rank(idx), xyz, {
                 "sharp_edge": boundary.astype(np.uint8),
                 "nx": nrm[:, 0], "ny": nrm[:, 1], "nz": nrm[:, 2]})

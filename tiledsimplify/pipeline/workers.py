@@ -236,9 +236,10 @@ def input_unreadable(client, paths) -> str:
     if not files:
         return "no input files to name"
     replies = client.run(unreadable, files)
-    bad = {worker: paths for worker, paths in replies.items() if paths}
+    bad = {worker: missed for worker, missed in replies.items() if missed}
     if not bad:
         return ""
-    worker, paths = next(iter(bad.items()))
+    worker, missed = next(iter(bad.items()))
+    more = f" and {len(missed) - 1} more" if len(missed) > 1 else ""
     return (f"{len(bad)} of {len(replies)} dask workers cannot read the input as this client "
-            f"does ({worker}: {paths[0]}{f' and {len(paths) - 1} more' if len(paths) > 1 else ''})")
+            f"does ({worker}: {missed[0]}{more})")

@@ -25,8 +25,8 @@ finished), ``plan`` (:meth:`TilePlan.to_dict`), ``halo``, ``halo_is_default``, `
 dict) and ``provenance`` (the caller's dict plus package,
 zarr and numpy versions and the UTC creation time).
 
-The ingest reads the input as consecutive parts (one by default; a LAS/LAZ input read by several
-workers at once, :meth:`TileStore.create`'s ``parts``). Each part owns a region of every tile's
+The ingest reads the input as consecutive parts (one by default; several read by workers at
+once, :meth:`TileStore.create`'s ``parts``). Each part owns a region of every tile's
 ``xyz``/``index``/``attrs`` arrays: ``r`` rows in all, part ``k``'s from row
 ``part_starts[k]`` (its points rounded up to whole chunks), of which the first
 ``part_counts[k][id]`` hold its points in tile ``id``. A tile's core is those rows, part after
@@ -621,9 +621,9 @@ class TileStore:
         map_parts : callable, optional
             ``map_parts(func, args, pass_number)`` returns ``[func(*a) for a in args]``, run
             anywhere (dask workers, other processes): each pass is one task per part, the
-            second writing each part's points of a tile to its own fragment of the tile's
-            arrays (read back in part order, so a store ingested in parts holds what one
-            ingested whole holds). Default: the parts one after another in this process.
+            second writing each part's points of a tile to the part's own region of the
+            tile's arrays (read back in part order, so a store ingested in parts holds what
+            one ingested whole holds). Default: the parts one after another in this process.
 
         Returns
         -------
@@ -677,18 +677,20 @@ class TileStore:
             map_parts = _map_here(progress)
 
         # ---- pass 1: count, cover check, bounds, sample (one task per part)
-        limit = _key_limit(sample_size, n_total) if n_parts > 1 else None
-        scans = map_parts(_scan_part, [(part, sample_size, seed, limit) for part in parts], 1)
-        intervals = [tuple(iv) for scan in scans for iv in scan["intervals"]]
-        n = cls._check_cover(intervals, n_total)
-        sampler = _BottomK(sample_size, seed)
-        for scan in scans:
-            sampler.merge(scan["keys"], scan["index"], scan["xyz"])
-        if sampler.keys.size < min(sample_size, n):  # pragma: no cover - odds ~1e-15
-            scans = map_parts(_scan_part, [(part, sample_size, seed, None) for part in parts], 1)
+        def scan_parts(limit):
+            scans = map_parts(_scan_part, [(part, sample_size, seed, limit) for part in parts],
+                              1)
             sampler = _BottomK(sample_size, seed)
             for scan in scans:
                 sampler.merge(scan["keys"], scan["index"], scan["xyz"])
+            return scans, sampler
+
+        limit = _key_limit(sample_size, n_total) if n_parts > 1 else None
+        scans, sampler = scan_parts(limit)
+        intervals = [tuple(iv) for scan in scans for iv in scan["intervals"]]
+        n = cls._check_cover(intervals, n_total)
+        if sampler.keys.size < min(sample_size, n):  # pragma: no cover - odds ~1e-15
+            scans, sampler = scan_parts(None)
         lo = np.min([scan["lo"] for scan in scans], axis=0)
         hi = np.max([scan["hi"] for scan in scans], axis=0)
         spec = _merge_specs([scan["spec"] for scan in scans]) or {}
@@ -855,7 +857,7 @@ class TileStore:
         if attrs.get("format_version") not in READS_VERSIONS:
             raise StoreError(f"{path} has tile store format version "
                              f"{attrs.get('format_version')!r}; this version reads "
-                             f"{FORMAT_VERSION}. Re-create the store.")
+                             f"{' and '.join(map(str, READS_VERSIONS))}. Re-create the store.")
         if attrs.get("complete") is not True:
             raise IncompleteStoreError(
                 f"the tile store at {path} is incomplete: its ingest was interrupted before "
