@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import FileFormatError
 from .las import LasSource
 from .mesh import _PLY_TYPES, _parse_ply_header, read_points
-from .sources import TEXT_SUFFIXES, _text_layout
+from .sources import TEXT_SUFFIXES, _text_header
 
 _XYZ = ("x", "y", "z")
 
@@ -81,7 +81,7 @@ def read_columns(path):
             return _split({name: arr[name] for name in arr.dtype.names})
         return read_points(path), {}
     if suffix in TEXT_SUFFIXES:
-        skip, _, delimiter = _text_layout(path)
+        skip, delimiter = _text_header(path)
         if skip:
             with open(path, encoding="ascii", errors="replace") as fh:
                 names = fh.readline().replace(",", " ").split()

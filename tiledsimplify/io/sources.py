@@ -237,9 +237,9 @@ def _first_bad_line(lines, delimiter):
     return None, None, None
 
 
-def _text_layout(path, chunk_points):
-    """(lines to skip, number of points, delimiter, chunk offsets) of an XYZ/CSV/TXT file, by
-    one scan (:func:`_scan_lines`)."""
+def _text_header(path):
+    """(lines to skip, delimiter) of an XYZ/CSV/TXT file, from its first line: a header if it
+    does not start with three numbers, commas if it has any."""
     with open(path, "rb") as fh:
         first = fh.readline()
     line = first.decode("ascii", errors="replace")
@@ -250,7 +250,13 @@ def _text_layout(path, chunk_points):
         header = len(tokens) < 3
     except ValueError:
         header = True
-    skip = int(header)
+    return int(header), delimiter
+
+
+def _text_layout(path, chunk_points):
+    """(lines to skip, number of points, delimiter, chunk offsets) of an XYZ/CSV/TXT file, by
+    one scan (:func:`_scan_lines`)."""
+    skip, delimiter = _text_header(path)
     n_lines, last, offsets = _scan_lines(path, skip, chunk_points, None)
     if last not in (b"", b"\n"):
         n_lines += 1  # a last line without a newline
