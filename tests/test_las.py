@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import shutil
 from pathlib import Path
 
@@ -255,6 +256,68 @@ def test_round_trip(tmp_path, name, suffix):
     again_xyz, again = LasSource(out_path, chunk_points=5000).read_all()
     np.testing.assert_array_equal(again_xyz, sub_xyz)
     np.testing.assert_array_equal(again["simplify_rank"], extra["simplify_rank"])
+
+
+@pytest.mark.parametrize("suffix", [".laz", ".las"])
+@pytest.mark.parametrize("name", [AUTZEN, EXTRA])
+def test_pieces_packed_elsewhere_write_what_laspy_writes(tmp_path, name, suffix):
+    """Pieces packed by a pickled copy of the layout (as a cluster worker would) make the
+    file LasOutput.write makes, and its header holds what laspy's own writer (which grows the
+    header from the points: bounds, points by return) gives the same records."""
+    import pickle
+    src, xyz, attrs = whole(name)
+    sel = np.arange(3, len(xyz), 11)
+    sub_xyz, sub = xyz[sel], {k: v[sel] for k, v in attrs.items()}
+    extra = new_dims(len(sel), 0)
+    cuts = [0, 1, len(sel) // 2, len(sel)]
+    parts = [(sub_xyz[lo:hi], {k: v[lo:hi] for k, v in sub.items()},
+              {k: v[lo:hi] for k, v in extra.items()}) for lo, hi in itertools.pairwise(cuts)]
+    with LasOutput(tmp_path / f"whole{suffix}", src.template_header()) as out:
+        for part in parts:
+            out.write(*part)
+    with LasOutput(tmp_path / f"pieces{suffix}", src.template_header()) as out:
+        remote = pickle.loads(pickle.dumps(out.layout))
+        for part in parts:
+            out.write_piece(pickle.loads(pickle.dumps(remote.pack(*part))))
+        out.write_piece(remote.pack(np.empty((0, 3)), {k: v[:0] for k, v in sub.items()},
+                                    {k: v[:0] for k, v in extra.items()}))
+    assert (tmp_path / f"pieces{suffix}").read_bytes() == (tmp_path / f"whole{suffix}").read_bytes()
+
+    back = laspy.read(tmp_path / f"pieces{suffix}")
+    ref = laspy.LasHeader(point_format=back.header.point_format, version=back.header.version)
+    ref.scales, ref.offsets = back.header.scales, back.header.offsets
+    ref.partial_reset()
+    ref.grow(back.points)
+    h = back.header
+    assert h.point_count == ref.point_count == len(sel)
+    np.testing.assert_array_equal(h.mins, ref.mins)
+    np.testing.assert_array_equal(h.maxs, ref.maxs)
+    assert list(h.number_of_points_by_return) == list(ref.number_of_points_by_return)
+    assert sum(h.number_of_points_by_return) == len(sel)
+
+
+def test_a_piece_of_another_layout_and_ranges_without_values(tmp_path):
+    src, xyz, attrs = whole(AUTZEN)
+    other, oxyz, oattrs = whole(EXTRA)
+    foreign = LasOutput(tmp_path / "b.laz", other.template_header())
+    piece = foreign.layout.pack(oxyz[:10], {k: v[:10] for k, v in oattrs.items()},
+                                new_dims(10, 0))
+    foreign.abort()
+    with (pytest.raises(ValueError, match="another layout"),
+          LasOutput(tmp_path / "a.laz", src.template_header()) as out):
+        out.write_piece(piece)
+    assert not list(tmp_path.iterdir())
+    # an added dimension with no valid value (every importance NaN) claims no min/max and
+    # stores zeros there
+    extra = new_dims(50, 0)
+    extra["importance"][:] = np.nan
+    write_las(tmp_path / "c.laz", src.template_header(), xyz[:50],
+              {k: v[:50] for k, v in attrs.items()}, extra=extra)
+    for struct in laspy.open(tmp_path / "c.laz").header.vlrs.get(
+            "ExtraBytesVlr")[0].extra_bytes_structs:
+        if struct.format_name() == "importance":
+            assert struct.options & (struct.MIN_BIT_MASK | struct.MAX_BIT_MASK) == 0
+            assert not any(bytes(struct._min)) and not any(bytes(struct._max))
 
 
 def test_evlrs_and_reused_dims_are_kept(tmp_path):

@@ -9,8 +9,9 @@ LasSource(spec, chunk_points=1_000_000)
     scales/offsets, CRS, dimension names) and reads it chunk by chunk with :meth:`LasSource.chunks`
     as ``(start_index, xyz float64 (m, 3), attrs dict name -> (m,) array)``.
 LasOutput(path, template_header, extra_dims=SIMPLIFY_DIMS)
-    Streaming writer (a context manager): ``out.write(xyz, attrs, extra)`` per chunk; the file
-    appears under ``path`` only when the ``with`` block ends without an exception.
+    Streaming writer (a context manager): ``out.write(xyz, attrs, extra)`` per chunk, or
+    ``out.write_piece(piece)`` for points packed elsewhere by ``out.layout.pack(...)``; the
+    file appears under ``path`` only when the ``with`` block ends without an exception.
 write_las(path, template_header, xyz, attrs, *, extra, extra_dims=SIMPLIFY_DIMS)
     One-shot wrapper of :class:`LasOutput`.
 SIMPLIFY_DIMS
@@ -38,7 +39,9 @@ Decisions
   specification allows: several Extra Bytes VLRs in the input (laspy only reads the first one
   and calls the rest "ExtraBytes") are merged here, so their real names survive. The header's
   generating software becomes ``tiledsimplify <version>`` and the creation date today; counts,
-  bounds, points-by-return and GPS-time range are recomputed by laspy's writer. Waveform data
+  bounds and points-by-return are recomputed as laspy's writer computes them, from each
+  written piece's summary (:mod:`.las_pieces`: points are packed into point records apart
+  from the writer, on a cluster's workers in a tiled run). Waveform data
   packets stored inside a file (point formats 4, 5, 9, 10) are not copied.
 * :meth:`LasOutput.write` is strict: ``attrs`` must hold every dimension of the template
   except ``X``, ``Y``, ``Z`` (given as float ``xyz``), ``extra`` every added dimension; unknown
@@ -78,6 +81,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import FileFormatError, InputError
+from .las_pieces import LasLayout, LasPiece, grow_header
 from .points_out import publish, write_failed
 
 __all__ = [
@@ -778,6 +782,7 @@ class LasOutput:
         self._finished = False
         self._writer = None
         self._ranges: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self.layout = LasLayout(self.path, header, self.attribute_names, self.extra_names)
 
         fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".partial",
                                    dir=directory)
@@ -844,53 +849,47 @@ class LasOutput:
         """
         if self._finished:
             raise ValueError(f"{self.path}: LasOutput is closed")
-        xyz = np.asarray(xyz, dtype=np.float64)
-        if xyz.ndim != 2 or xyz.shape[1] != 3:
-            raise InputError(f"{self.path}: xyz must have shape (m, 3), got {xyz.shape}")
-        m = len(xyz)
-        attrs = dict(attrs or {})
-        extra = dict(extra or {})
-        unknown = sorted(set(attrs) - set(self.attribute_names))
-        unknown += sorted(set(extra) - set(self.extra_names))
-        if unknown:
-            raise InputError(f"{self.path}: unknown dimension(s) {unknown}; the output has "
-                             f"{list(self.attribute_names)}")
-        missing = [n for n in self.attribute_names if n not in attrs and n not in extra]
-        missing += [n for n in self.extra_names if n not in extra]
-        if missing:
-            raise InputError(f"{self.path}: no values given for dimension(s) {missing}; pass "
-                             "every input dimension in attrs (from LasSource.chunks) and every "
-                             "added one in extra")
-        if m == 0:
-            return
+        self.write_piece(self.layout.pack(xyz, attrs, extra))
 
-        header = self.header
-        scales = np.asarray(header.scales, dtype=np.float64)
-        offsets = np.asarray(header.offsets, dtype=np.float64)
-        grid = np.round((xyz - offsets) / scales)
-        if not np.isfinite(grid).all():
-            raise InputError(f"{self.path}: xyz has NaN or infinite coordinates")
-        low, high = grid.min(axis=0), grid.max(axis=0)
-        if (low < _INT32.min).any() or (high > _INT32.max).any():
-            raise InputError(
-                f"{self.path}: coordinates {xyz.min(axis=0)} .. {xyz.max(axis=0)} do not fit "
-                f"the output's int32 grid (scales {scales}, offsets {offsets}); points of "
-                "another file far from the first one? Rescale the inputs to common offsets "
-                "first (e.g. `pdal translate --writers.las.offset_x=auto ...`).")
-        rec = laspy.ScaleAwarePointRecord.zeros(m, header=header)
-        for axis, dim in enumerate(_XYZ):
-            rec[dim] = grid[:, axis].astype(np.int32)
-        for name in self.attribute_names + self.extra_names:
-            if name in _XYZ:
-                continue
-            values = extra[name] if name in extra else attrs[name]
-            self._set(rec, name, values, m)
-        self._grow_ranges(rec)
+    def write_piece(self, piece: LasPiece) -> None:
+        """Append points packed by :meth:`.LasLayout.pack` of :attr:`layout` — here or
+        anywhere else, e.g. on a cluster worker. The point records go to laspy's point writer
+        (for LAZ, LASzip's compressor) as they are; the header grows by the piece's summary,
+        as laspy's ``LasHeader.grow`` would by its points (:func:`.las_pieces.grow_header`).
+
+        Raises
+        ------
+        ValueError
+            The output is closed, or the piece was packed for another point format.
+        InputError
+            The file would hold more points than its LAS version can count.
+        """
+        if self._finished:
+            raise ValueError(f"{self.path}: LasOutput is closed")
+        if not piece.count:
+            return
+        header = self._writer.header
+        if header.max_point_count() - header.point_count < piece.count:
+            raise InputError(f"{self.path}: {header.point_count + piece.count} points do not "
+                             f"fit a LAS {header.version} file (at most "
+                             f"{header.max_point_count()}); write LAS 1.4.")
+        fmt = header.point_format
+        if len(piece.data) != piece.count * fmt.size:
+            raise ValueError(f"{self.path}: a piece of {piece.count} points holds "
+                             f"{len(piece.data)} bytes, not {piece.count} records of "
+                             f"{fmt.size}: packed for another layout")
+        records = laspy.PackedPointRecord(np.frombuffer(piece.data, fmt.dtype()), fmt)
         try:
-            self._writer.write_points(rec)
+            self._writer.point_writer.write_points(records)
         except Exception as exc:
             raise self._write_error(exc) from exc
-        self.count += m
+        grow_header(header, piece)
+        for name, (lo, hi) in piece.ranges.items():
+            old = self._ranges.get(name)
+            if old is not None:
+                lo, hi = np.fmin(old[0], lo), np.fmax(old[1], hi)
+            self._ranges[name] = (lo, hi)
+        self.count += piece.count
 
     def _write_error(self, exc):
         """The error to raise when the writer fails: :func:`.points_out.write_failed`, as for
@@ -901,51 +900,10 @@ class LasOutput:
         return write_failed(self.path, f"{type(exc).__name__}: {exc}",
                             exc.errno if isinstance(exc, OSError) else None)
 
-    def _set(self, rec, name, values, m):
-        values = np.asarray(values)
-        if values.shape[:1] != (m,):
-            raise InputError(f"{self.path}: dimension {name!r} has {values.shape} values for "
-                             f"{m} points")
-        dim = self.header.point_format.dimension_by_name(name)
-        scaled = dim.scales is not None or dim.offsets is not None
-        target = np.dtype(dim.dtype).base if dim.dtype is not None else np.dtype(np.uint8)
-        if target.kind in "iu" and not scaled and values.dtype.kind not in "biu":
-            raise InputError(f"{self.path}: dimension {name!r} holds integers ({target}) but "
-                             f"got {values.dtype} values; convert them first")
-        if target.kind in "iu" and not scaled and values.size and values.dtype.kind in "iu":
-            info = np.iinfo(target)
-            vmin, vmax = int(values.min()), int(values.max())
-            if vmin < info.min or vmax > info.max:
-                raise InputError(f"{self.path}: dimension {name!r} ({target}) cannot hold "
-                                 f"values {vmin} .. {vmax}")
-        try:
-            rec[name] = values
-        except Exception as exc:
-            raise InputError(f"{self.path}: cannot store values in dimension {name!r} "
-                             f"({type(exc).__name__}: {exc})") from exc
-
-    def _grow_ranges(self, rec):
-        """Track the raw min/max of every extra dimension (no-data and NaN left out)."""
-        for dim in self.header.point_format.extra_dimensions:
-            raw = np.asarray(rec.array[dim.name]).reshape(len(rec), -1)
-            lo = np.full(raw.shape[1], np.nan)
-            hi = np.full(raw.shape[1], np.nan)
-            for i in range(raw.shape[1]):
-                col = raw[:, i]
-                if dim.no_data is not None:
-                    col = col[col != np.asarray(dim.no_data).reshape(-1)[i]]
-                if col.dtype.kind == "f":
-                    col = col[~np.isnan(col)]
-                if col.size:
-                    lo[i], hi[i] = col.min(), col.max()
-            old = self._ranges.get(dim.name)
-            if old is not None:
-                lo, hi = np.fmin(old[0], lo), np.fmax(old[1], hi)
-            self._ranges[dim.name] = (lo, hi)
-
     def _set_extra_bytes_ranges(self):
         """Store the tracked min/max in the Extra Bytes VLR (laspy 2.7 records, for one-element
-        dimensions, the first point's value); without valid values, claim no min/max."""
+        dimensions, the first point's value); without valid values, claim no min/max (and
+        store zeros there, not what the header was reset to)."""
         for vlr in self._writer.header.vlrs.get("ExtraBytesVlr"):
             for struct in vlr.extra_bytes_structs:
                 if struct.data_type == 0:
@@ -960,6 +918,8 @@ class LasOutput:
                     struct._raw_max()[:] = hi
                 except Exception:
                     struct.options &= ~bits
+                    for raw in (struct._min, struct._max):
+                        np.frombuffer(raw, np.uint8)[:] = 0
 
     # ---- finishing ----------------------------------------------------------------------
 

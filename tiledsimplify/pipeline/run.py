@@ -817,16 +817,30 @@ def _kept(ts, tile, prefix, refined):
     return _keep(ts, tile, prefix, refined), ts.read_result(tile, "boundary")
 
 
-def _tile_records(store_path, tile, prefix, refined):
-    """What the output takes from one tile: its kept core points' ``(xyz, attrs, boundary)``
-    (None if it keeps none), read wherever this runs (a cluster worker: the client then only
-    compresses and writes)."""
+def _tile_piece(store_path, tile, prefix, refined, layout, is_las):
+    """What a LAS/LAZ output takes from one tile: ``(piece, boundary count)`` — its kept core
+    points packed as the output's point records (:meth:`.LasLayout.pack`: quantised, checked,
+    with the three added dimensions; a non-LAS input's points get
+    :data:`~tiledsimplify.io.las.NEW_POINT_DEFAULTS`) — or None if it keeps none. Made
+    wherever this runs: on a cluster, a worker, and the client then only compresses and
+    writes (:meth:`.LasOutput.write_piece`)."""
+    from ..io.las import NEW_POINT_DEFAULTS
     ts = TileStore.open(store_path)
     keep, boundary = _kept(ts, tile, prefix, refined)
     if not keep.any():
         return None
-    xyz, _ = ts.core(tile)
-    return xyz[keep], {k: v[keep] for k, v in ts.attrs(tile).items()}, boundary[keep]
+    xyz = ts.core(tile)[0][keep]
+    boundary = boundary[keep]
+    k = len(xyz)
+    if is_las:
+        attrs = {name: values[keep] for name, values in ts.attrs(tile).items()}
+    else:  # a new LAS 1.4 layout: the input had no point records to keep
+        attrs = {name: np.full(k, NEW_POINT_DEFAULTS.get(name, 0))
+                 for name in layout.attribute_names}
+    piece = layout.pack(xyz, attrs, {"sharp_edge": boundary.astype(np.uint8),
+                                     "importance": np.full(k, np.nan),
+                                     "simplify_rank": np.full(k, -1, dtype=np.int64)})
+    return piece, int(boundary.sum())
 
 
 #: tiles read ahead of the one being written, per worker (each a tile's kept records)
@@ -857,33 +871,28 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
     """Write the kept core points of every tile: the refined flags if ``refined``, else the
     cut's. LAS/LAZ tile by tile, the other formats in input order at each point's rank
     (:class:`.input_order.InputRanks`, :class:`~tiledsimplify.io.points_out.PointsAt`), in
-    memory bounded by a tile; on a cluster the tiles' kept records are read ahead by its
-    workers (:func:`_in_tile_order`)."""
+    memory bounded by a tile; on a cluster the tiles' kept records are read — and for
+    LAS/LAZ packed as point records (:func:`_tile_piece`) — ahead by its workers
+    (:func:`_in_tile_order`)."""
     n_out = n_boundary = 0
     path = str(ts.path)
     if output.suffix.lower() in LAS_SUFFIXES:
-        from ..io.las import NEW_POINT_DEFAULTS, LasOutput, new_header
+        from ..io.las import LasOutput, new_header
         if source.is_las:
             template = source.template_header()
         else:  # a new LAS 1.4 layout: the input had no point records to keep
             lo, hi = ts.root_attrs["bounds"]
             template = new_header(lo, hi, ts.spacing)
         with LasOutput(output, template) as out:
-            for got in _in_tile_order(_tile_records, lambda i: (path, i, prefix, refined),
-                                      ts.n_tiles, client):
+            for got in _in_tile_order(
+                    _tile_piece, lambda i: (path, i, prefix, refined, out.layout, source.is_las),
+                    ts.n_tiles, client):
                 if got is None:
                     continue
-                xyz, attrs, boundary = got
-                k = len(xyz)
-                if not source.is_las:
-                    attrs = {name: np.full(k, NEW_POINT_DEFAULTS.get(name, 0))
-                             for name in out.attribute_names}
-                out.write(xyz, attrs, {
-                    "sharp_edge": boundary.astype(np.uint8),
-                    "importance": np.full(k, np.nan),
-                    "simplify_rank": np.full(k, -1, dtype=np.int64)})
-                n_out += k
-                n_boundary += int(boundary.sum())
+                piece, boundary = got
+                out.write_piece(piece)
+                n_out += piece.count
+                n_boundary += boundary
         return n_out, n_boundary
     # in input order, a tile at a time
     ranks = InputRanks(ts.n_total)
