@@ -40,7 +40,8 @@ def test_global_cut_is_exact_and_prefers_flat_tiles():
 def test_global_cut_matches_sorting_every_step(monkeypatch, collect):
     """The radix selection against the cut's definition (sort every (running max, tile, step)),
     on ties, plateaus, -0.0, inf and empty tiles; ``collect`` 0 forces all four passes down to a
-    single key, 3 a mixture of collected and counted ranges."""
+    single key, 3 a mixture of collected and counted ranges; and the same with each pass run
+    over separate sets of tiles and merged."""
     from naive import global_cut_by_sorting
 
     from tiledsimplify.pipeline import budget
@@ -54,8 +55,18 @@ def test_global_cut_matches_sorting_every_step(monkeypatch, collect):
         seqs = {int(t): kinds[rng.integers(len(kinds))](int(rng.integers(0, 40)))
                 for t in rng.choice(50, rng.integers(1, 7), replace=False)}
         total = sum(len(q) for q in seqs.values())
+        tiles = sorted(seqs)
+        batches = [tiles[:1], tiles[1:3], tiles[3:]]  # passes over separate sets of tiles,
+        # as a cluster's workers run them (run._cut_scan), merged
+
+        def scan(lo, bits, final):
+            return budget.merge_passes(budget.count_pass(seqs, b, lo, bits, final)
+                                       for b in batches)
         for n_remove in {0, 1, total // 3, total // 2, total - 1, total, total + 5}:
-            assert global_cut(seqs, n_remove) == global_cut_by_sorting(seqs, n_remove)
+            want = global_cut_by_sorting(seqs, n_remove)
+            assert global_cut(seqs, n_remove) == want
+            assert budget.plan_cut(seqs, n_remove, dict.fromkeys(seqs, True),
+                                   scan=scan)[0] == want
 
 
 def test_global_cut_holds_one_tile_at_a_time(monkeypatch):

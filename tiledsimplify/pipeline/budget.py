@@ -57,15 +57,76 @@ def _float(key):
     return float(np.array([bits], dtype=np.uint64).view(np.float64)[0])
 
 
-def _select(sequences, tiles, rank, counts=None):
+def count_pass(sequences, tiles, lo, bits, final):
+    """One pass of the selection (:func:`_select`) over ``tiles``, read one at a time from
+    ``sequences``: per tile the number of keys (:func:`_keys`) below ``lo`` (``below``), its
+    number of keys (``size``) and largest running maximum (``top``, -inf: none), and for the
+    keys in ``[lo, lo + 2**bits)``: if ``bits`` is 0, their number (``equal``); else, if
+    ``final``, the keys themselves (``kept``); else their histogram by their next
+    :data:`DIGIT` bits (``hist``). Passes over separate sets of tiles — on a cluster's workers,
+    :func:`store_pass` — combine by :func:`merge_passes`."""
+    shift = max(bits - DIGIT, 0)
+    hi = lo + (1 << bits)
+    out = {"hist": np.zeros(1 << DIGIT, dtype=np.int64) if bits and not final else None,
+           "below": {}, "equal": {}, "kept": {}, "size": {}, "top": {}}
+    for t in tiles:
+        key = _keys(sequences[t])
+        out["size"][t] = key.size
+        out["top"][t] = _float(key[-1]) if key.size else -np.inf
+        a = int(np.searchsorted(key, np.uint64(lo))) if lo else 0
+        b = int(np.searchsorted(key, np.uint64(hi))) if hi < 1 << 64 else key.size
+        out["below"][t] = a
+        if bits == 0:  # a single key: the level
+            out["equal"][t] = b - a
+        elif final:
+            out["kept"][t] = key[a:b].copy()  # not a view: it would hold the tile
+        else:
+            out["hist"] += np.bincount(((key[a:b] - np.uint64(lo)) >> np.uint64(shift))
+                                       .astype(np.intp), minlength=1 << DIGIT)
+    return out
+
+
+def merge_passes(passes):
+    """One :func:`count_pass` result from those over separate sets of tiles."""
+    passes = list(passes)
+    out = {name: {k: v for got in passes for k, v in got[name].items()}
+           for name in ("below", "equal", "kept", "size", "top")}
+    hists = [got["hist"] for got in passes if got["hist"] is not None]
+    out["hist"] = np.sum(hists, axis=0) if hists else None
+    return out
+
+
+def store_pass(store_path, tiles, lo, bits, final):
+    """:func:`count_pass` over tiles of the tile store at ``store_path``, read where this
+    runs (a cluster worker: the cut's passes then read the tiles in parallel, not in the
+    client)."""
+    from ..tiles import TileStore
+    store = TileStore.open(store_path)
+    return count_pass(_TileSequence(store), tiles, lo, bits, final)
+
+
+class _TileSequence:
+    """``[tile]`` -> a tile's known sequence, read from a store (what :func:`count_pass` needs
+    of :class:`StoreSequences`, without reading every tile's attributes first)."""
+
+    def __init__(self, store):
+        self.store = store
+
+    def __getitem__(self, tile):
+        return tile_sequence(self.store.read_result(tile, "step"),
+                             self.store.read_result(tile, "importance"))
+
+
+def _select(scan, rank, counts=None):
     """The ``rank``-th smallest (1-based) running maximum over every tile's sequence.
 
     Returns ``(key, below, equal)``: its key (:func:`_keys`), and per tile the number of steps
-    whose running maximum lies below it and at it. A radix selection: each pass reads the
-    tiles one at a time and counts, by their next :data:`DIGIT` bits, the keys in the range
-    the level is known to lie in; the range narrows to the digit holding the ``rank``-th key.
-    Once it holds at most :data:`COLLECT` keys, a last pass keeps them and selects in memory.
-    Four passes at most (64 bits), two or three on real sequences; memory: one tile's keys, a
+    whose running maximum lies below it and at it. A radix selection: each pass
+    (``scan(lo, bits, final)``: :func:`count_pass` over every tile) reads the tiles one at a
+    time and counts, by their next :data:`DIGIT` bits, the keys in the range the level is
+    known to lie in; the range narrows to the digit holding the ``rank``-th key. Once it
+    holds at most :data:`COLLECT` keys, a last pass keeps them and selects in memory. Four
+    passes at most (64 bits), two or three on real sequences; memory: one tile's keys, a
     histogram and at most :data:`COLLECT` keys. ``counts`` (the first pass's histogram over
     all keys, if the caller has it) saves a pass.
     """
@@ -77,24 +138,12 @@ def _select(sequences, tiles, rank, counts=None):
             hist, counts = counts, None
         else:
             final = bits == 0 or (size is not None and size <= COLLECT)
-            hi = lo + (1 << bits)
-            hist = np.zeros(1 << DIGIT, dtype=np.int64)
-            kept, below, equal = {}, {}, {}
-            for t in tiles:
-                key = _keys(sequences[t])
-                a = int(np.searchsorted(key, np.uint64(lo))) if lo else 0
-                b = int(np.searchsorted(key, np.uint64(hi))) if hi < 1 << 64 else key.size
-                below[t] = a
-                if bits == 0:  # a single key: the level
-                    equal[t] = b - a
-                elif final:
-                    kept[t] = key[a:b].copy()  # not a view: it would hold the tile
-                else:
-                    hist += np.bincount(((key[a:b] - np.uint64(lo)) >> np.uint64(shift))
-                                        .astype(np.intp), minlength=1 << DIGIT)
+            got = scan(lo, bits, final)
+            below, equal = got["below"], got["equal"]
             if bits == 0:
                 return lo, below, equal
             if final:
+                kept = got["kept"]
                 every = np.concatenate(list(kept.values()))
                 level = every[np.argpartition(every, rank - 1)[rank - 1]]
                 del every
@@ -103,6 +152,7 @@ def _select(sequences, tiles, rank, counts=None):
                     below[t] += i
                     equal[t] = int(np.searchsorted(k, level, side="right")) - i
                 return int(level), below, equal
+            hist = got["hist"]
         cum = np.cumsum(hist)
         d = int(np.searchsorted(cum, rank, side="left"))
         rank -= int(cum[d - 1]) if d else 0
@@ -119,23 +169,21 @@ class _Cut(NamedTuple):
     top: dict  # tile -> the largest known running maximum (-inf: no step known)
 
 
-def _cut(sequences, n_remove):
-    """The cut over the known steps (:class:`_Cut`), one tile in memory at a time."""
+def _cut(sequences, n_remove, scan=None):
+    """The cut over the known steps (:class:`_Cut`), one tile in memory at a time; ``scan``
+    runs a pass of the selection over every tile (default: :func:`count_pass` here)."""
     tiles = sorted(sequences)
-    hist = np.zeros(1 << DIGIT, dtype=np.int64)
-    top, size = {}, {}
-    for t in tiles:  # the first pass of the selection, with each tile's size and top
-        key = _keys(sequences[t])
-        size[t] = key.size
-        top[t] = _float(key[-1]) if key.size else -np.inf
-        hist += np.bincount((key >> np.uint64(64 - DIGIT)).astype(np.intp),
-                            minlength=1 << DIGIT)
+    if scan is None:
+        def scan(lo, bits, final):
+            return count_pass(sequences, tiles, lo, bits, final)
+    first = scan(0, 64, False)  # the first pass of the selection, with each tile's size, top
+    size, top, hist = first["size"], first["top"], first["hist"]
     total = sum(size.values())
     take = min(max(int(n_remove), 0), total)
     prefix = {t: 0 for t in tiles}
     if take == 0:
         return _Cut(prefix, -np.inf, -1, n_remove > total, top)
-    key, below, equal = _select(sequences, tiles, take, counts=hist)
+    key, below, equal = _select(scan, take, counts=hist)
     rest = take
     for t in tiles:  # every step below the level, then ties at the level by tile, step
         prefix[t] = below[t]
@@ -220,9 +268,12 @@ def deeper_tiles(sequences, n_remove, exhausted, known=None):
     return _deeper(_cut(sequences, n_remove), sequences, n_remove, exhausted, known)
 
 
-def plan_cut(sequences, n_remove, exhausted, known=None):
-    """:func:`global_cut` and :func:`deeper_tiles` from one selection: ``(prefix, need)``."""
-    cut = _cut(sequences, n_remove)
+def plan_cut(sequences, n_remove, exhausted, known=None, scan=None):
+    """:func:`global_cut` and :func:`deeper_tiles` from one selection: ``(prefix, need)``;
+    ``scan(lo, bits, final)``, if given, runs each pass of the selection over every tile
+    (:func:`count_pass`; on a cluster, :func:`store_pass` on its workers, merged by
+    :func:`merge_passes`)."""
+    cut = _cut(sequences, n_remove, scan)
     return cut.prefix, _deeper(cut, sequences, n_remove, exhausted, known)
 
 

@@ -37,7 +37,7 @@ from ..io.las import LAS_SUFFIXES
 from ..io.points_out import PointsAt, check_output, check_space, record_bytes
 from ..io.sources import open_source
 from ..tiles import IncompleteStoreError, TileStore
-from .budget import kept_in_tile, plan_cut, store_sequences
+from .budget import kept_in_tile, merge_passes, plan_cut, store_pass, store_sequences
 from .input_order import InputRanks
 from .tile_refine import cut_hausdorff, is_refined, refine_phases, refine_tile
 from .tile_task import (
@@ -672,7 +672,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         n_deeper = 0
         for _ in range(3):  # the sequences are read from the store a tile at a time
             seqs, exhausted, known = store_sequences(ts)
-            prefix, need = plan_cut(seqs, n - target, exhausted, known)
+            prefix, need = plan_cut(seqs, n - target, exhausted, known,
+                                    _cut_scan(str(store_path), sorted(seqs), client))
             if not need:
                 break
             n_deeper += len(need)
@@ -865,6 +866,27 @@ def _in_tile_order(func, args, n, client):
             pending.append(client.submit(func, *args(i + ahead), pure=False))
         yield fut.result()
         del fut
+
+
+#: tasks per worker thread in each pass of the global cut on a cluster (:func:`_cut_scan`)
+CUT_TASKS = 4
+
+
+def _cut_scan(store_path, tiles, client):
+    """How the global cut's passes (:func:`.budget.count_pass`) read the tiles: on a cluster,
+    in batches of tiles on its workers (:func:`.budget.store_pass`, ``CUT_TASKS`` per
+    thread), merged here; else None — here, a tile at a time (zarr's reads go through one
+    event loop, so local threads would not read faster; the output stage measured so)."""
+    if client is None or not tiles:
+        return None
+    size = -(-len(tiles) // (CUT_TASKS * max(1, sum(client.nthreads().values()))))
+    batches = [tiles[i:i + size] for i in range(0, len(tiles), size)]
+
+    def scan(lo, bits, final):
+        return merge_passes(client.gather(client.map(
+            store_pass, [store_path] * len(batches), batches, lo=lo, bits=bits, final=final,
+            pure=False)))
+    return scan
 
 
 def _write_output(ts, source, output, prefix, refined=False, client=None):
