@@ -608,3 +608,31 @@ def test_results_write_read_and_resume(tmp_path, monkeypatch):
         store.write_result(3, {"a/b": np.ones(store.count(3), bool)}, overwrite=True)
     with pytest.raises(InputError):
         store.core(store.n_tiles)
+
+
+def test_arrays_made_from_known_metadata_write_what_zarr_reads(tmp_path):
+    """A part of the input makes each tile's arrays from tile 0's metadata, without reading
+    their zarr.json (``_array_at``): what it writes there, zarr reads back."""
+    import zarr
+    from zarr.core.group import GroupMetadata
+    from zarr.storage import LocalStore
+
+    from tiledsimplify.tiles.store import _array_at
+    spec = {"intensity": (np.dtype("uint16"), ()), "rgb": (np.dtype("uint16"), (3,))}
+    templates = TileStore._array_templates(spec, 1000, 5000)
+    nodes = {"tiles": GroupMetadata()}
+    for t in range(3):
+        nodes[f"tiles/{t}"] = GroupMetadata()
+        nodes[f"tiles/{t}/attrs"] = GroupMetadata()
+        for key, meta in templates.items():
+            nodes[f"tiles/{t}/{key}"] = meta
+    store = LocalStore(tmp_path)
+    zarr.open_group(store, mode="w")
+    dict(zarr.create_hierarchy(store=store, nodes=nodes))
+    meta = zarr.open_group(store, mode="r")["tiles/0/attrs/rgb"].metadata
+    rgb = np.arange(15, dtype=np.uint16).reshape(5, 3)
+    _array_at(store, "tiles/2/attrs/rgb", meta)[1000:1005] = rgb
+    back = zarr.open_group(store, mode="r")["tiles/2/attrs/rgb"]
+    assert back.shape == (5000, 3) and back.dtype == np.uint16
+    np.testing.assert_array_equal(back[1000:1005], rgb)
+    assert not back[:1000].any() and not back[1005:].any()
