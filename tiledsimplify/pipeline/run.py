@@ -257,7 +257,8 @@ def _ingest_parts(source, n, scheduler, workers, client):
 
 def _parts_mapper(scheduler, workers, client, ingest):
     """``map_parts`` of :meth:`.TileStore.create` on the run's scheduler: a pass is one task
-    per part, reported to ``ingest`` (:class:`_IngestProgress`) as each part ends."""
+    per part, reported to ``ingest`` (:class:`_IngestProgress`) as each part ends; "pass"
+    0, the store's layout in batches of tiles, is not reported."""
 
     def run(func, args, pass_number):
         token = uuid.uuid4().hex
@@ -266,6 +267,8 @@ def _parts_mapper(scheduler, workers, client, ingest):
         tasks = [dask.delayed(func, pure=False)(
             *a, dask_key_name=f"ingest-{name}-{last - i:05d}-{token}")  # first parts first
             for i, a in enumerate(args)]
+        if not pass_number:  # the store's layout, between the passes: no points to report
+            return _compute(tasks, scheduler, workers, client, False, "ingest layout")
         read = [0]
 
         def line(result, done, total, pace=""):

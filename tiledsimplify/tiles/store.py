@@ -445,6 +445,27 @@ def _merge_specs(specs):
     return first
 
 
+def _lay_out_tiles(store, tiles, spec, chunk_rows: int, rows: int, made: bool = False,
+                   progress=None):
+    """Lay out the groups and empty arrays of ``tiles`` (``rows`` rows each, in chunks of
+    ``chunk_rows``) in the store at ``store`` (a path or a ``LocalStore``; its ``tiles``
+    group made), at once (zarr's concurrent metadata writes); with ``made``, return the nodes by name, else
+    ``{"points": 0}`` (a ``map_parts`` task of :meth:`TileStore.create`: parts of the layout
+    then run where the parts of the input do)."""
+    if not isinstance(store, LocalStore):
+        store = LocalStore(store)
+    templates = TileStore._array_templates(spec, chunk_rows, rows)
+    group = GroupMetadata()
+    nodes: dict[str, Any] = {}
+    for t in tiles:
+        nodes[f"tiles/{t}"] = group
+        nodes[f"tiles/{t}/attrs"] = group
+        for key, meta in templates.items():
+            nodes[f"tiles/{t}/{key}"] = meta
+    done = dict(zarr.create_hierarchy(store=store, nodes=nodes))
+    return done if made else {"points": 0}
+
+
 def _array_at(store: LocalStore, name: str, metadata) -> zarr.Array:
     """The array ``name`` of ``store`` whose metadata is known (as laid out): no read. A part
     of the input that writes to every tile (a scan-ordered file) opened each tile's arrays
@@ -637,7 +658,9 @@ class TileStore:
             anywhere (dask workers, other processes): each pass is one task per part, the
             second writing each part's points of a tile to the part's own region of the
             tile's arrays (read back in part order, so a store ingested in parts holds what
-            one ingested whole holds). Default: the parts one after another in this process.
+            one ingested whole holds); and, between the passes, ``pass_number`` 0: the
+            tiles' groups and arrays laid out in batches of tiles (a ``zarr.json`` each).
+            Default: the parts one after another in this process.
 
         Returns
         -------
@@ -758,20 +781,21 @@ class TileStore:
         attrs["part_starts"] = starts[:-1].tolist()
         store = LocalStore(path)
         root = zarr.open_group(store, mode="w", attributes=attrs)
-        templates = cls._array_templates(spec, chunk_rows, int(starts[-1]))
-        group = GroupMetadata()
-        nodes: dict[str, Any] = {"tiles": group}
-        for t in range(plan.n_tiles):
-            nodes[f"tiles/{t}"] = group
-            nodes[f"tiles/{t}/attrs"] = group
-            for key, meta in templates.items():
-                nodes[f"tiles/{t}/{key}"] = meta
-        made = dict(zarr.create_hierarchy(store=store, nodes=nodes))
+        rows = int(starts[-1])
+        dict(zarr.create_hierarchy(store=store, nodes={"tiles": GroupMetadata()}))
+        if in_process:
+            made = _lay_out_tiles(store, range(plan.n_tiles), spec, chunk_rows, rows, True)
+            here = {(t, key): made[f"tiles/{t}/{key}"] for t in range(plan.n_tiles)
+                    for key in ("xyz", "index", *(f"attrs/{name}" for name in spec))}
+            del made
+        else:  # the tiles' nodes laid out by the parts' mapper too: a zarr.json each,
+            # ~0.6-0.9 ms apiece here, 2,000 tiles' worth ~30 s serial in the client
+            batches = np.array_split(np.arange(plan.n_tiles), min(plan.n_tiles, 4 * n_parts))
+            map_parts(_lay_out_tiles, [(str(path), batch.tolist(), spec, chunk_rows, rows)
+                                       for batch in batches], 0)
+            here = None
 
         # ---- pass 2: assign and append, one task per part
-        here = {(t, key): made[f"tiles/{t}/{key}"] for t in range(plan.n_tiles)
-                for key in templates} if in_process else None
-        del made
         fills = map_parts(_fill_part, [
             (str(path), part, int(starts[k]), scans[k]["intervals"], spec, buffer_points, here)
             for k, part in enumerate(parts)], 2)
