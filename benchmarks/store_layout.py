@@ -40,12 +40,11 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     import zarr
+    from zarr.core.buffer import default_buffer_prototype
     from zarr.core.group import GroupMetadata
     from zarr.storage import LocalStore
 
     from tiledsimplify.tiles import TileStore
-    from zarr.core.buffer import default_buffer_prototype
-
     from tiledsimplify.tiles.store import _array_at
 
     spec = {f"dim{i}": (np.dtype("uint16"), ()) for i in range(args.attrs)}
@@ -72,11 +71,11 @@ def main(argv=None):
             store = LocalStore(path)
             zarr.open_group(store, mode="w")
             if how.startswith("zarr."):
-                timed("lay out", how, lambda: dict(zarr.create_hierarchy(store=store,
-                                                                          nodes=nodes)))
+                timed("lay out", how, lambda store=store: dict(zarr.create_hierarchy(
+                    store=store, nodes=nodes)))
             else:
-                timed("lay out", how, lambda: _write_files(path, nodes,
-                                                           default_buffer_prototype()))
+                timed("lay out", how, lambda path=path: _write_files(
+                    path, nodes, default_buffer_prototype()))
         root = zarr.open_group(store, mode="r+")
         timed("a part gets every tile's arrays", "opened (zarr.json read)",
               lambda: [root[f"tiles/{t}/{key}"] for t in range(args.tiles) for key in keys])

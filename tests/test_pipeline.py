@@ -59,7 +59,7 @@ def test_global_cut_matches_sorting_every_step(monkeypatch, collect):
         batches = [tiles[:1], tiles[1:3], tiles[3:]]  # passes over separate sets of tiles,
         # as a cluster's workers run them (run._cut_scan), merged
 
-        def scan(lo, bits, final):
+        def scan(lo, bits, final, seqs=seqs, batches=batches):
             return budget.merge_passes(budget.count_pass(seqs, b, lo, bits, final)
                                        for b in batches)
         for n_remove in {0, 1, total // 3, total // 2, total - 1, total, total + 5}:
