@@ -6,8 +6,11 @@ million kept points. On a cluster both now read the tiles on its workers: the cu
 (:func:`tiledsimplify.pipeline.budget.store_pass`, batches of tiles, merged in the client) and
 the output's tiles, which the workers also pack as the output's point records (quantised,
 checked, the three added dimensions; :func:`tiledsimplify.pipeline.run._tile_piece`,
-:meth:`tiledsimplify.io.las.LasLayout.pack`) — the client then only compresses (LASzip, in
-parallel over its cores) and writes.
+:meth:`tiledsimplify.io.las.LasLayout.pack`) and, for LAZ, compress into the file's LASzip
+chunks, those that straddle tiles too (:func:`tiledsimplify.pipeline.run._write_laz_chunks`)
+— the client then only writes bytes. With ``--scheduler-process`` the scheduler runs in a
+process of its own (as on a real cluster); a ``LocalCluster`` runs it in this one, whose CPU
+then includes the scheduler's work.
 
 This runs one pipeline to a kept tile store (or takes ``--store``), then ``--rounds`` times
 computes the global cut and writes the output, in this process and on a ``LocalCluster`` of
@@ -40,6 +43,10 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--ratio", type=float, default=0.2)
+    ap.add_argument("--scheduler-process", action="store_true",
+                    help="the scheduler in a process of its own (distributed's "
+                         "SubprocessCluster), as on a real cluster; a LocalCluster runs it in "
+                         "this process, whose CPU then includes it")
     args = ap.parse_args(argv)
 
     import distributed
@@ -61,9 +68,15 @@ def main(argv=None):
         prefix = dict(enumerate(ts.run_attrs["cut"]))
         refined = ts.read_refined(0) is not None
         rows, outputs = [], {}
-        with distributed.LocalCluster(
-                n_workers=args.workers, threads_per_worker=1, processes=True,
-                dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        if args.scheduler_process:
+            from distributed.deploy.subprocess import SubprocessCluster
+            make = SubprocessCluster(n_workers=args.workers, threads_per_worker=1,
+                                     dashboard_address=":0")
+        else:
+            make = distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1,
+                                            processes=True, dashboard_address=None)
+        with make as cluster, distributed.Client(cluster) as client:
+            client.wait_for_workers(args.workers)
             client.run(lambda: __import__("tiledsimplify.pipeline.run"))  # out of the timing
             on_cluster = f"on {args.workers} workers"
             n_remove = ts.n_total - sum(int(kept_in_tile(ts, t, prefix).sum())
@@ -95,7 +108,9 @@ def main(argv=None):
                     out.unlink()
                 assert len(set(outputs.values())) == 1, "the outputs differ"
     print(f"\n{src.count:,} input points ({args.input}), {n_out:,} kept, {args.suffix} output; "
-          f"{args.workers} one-thread worker processes; the same cut and output bytes both ways\n")
+          f"{args.workers} one-thread worker processes, the scheduler "
+          f"{'in a process of its own' if args.scheduler_process else 'in this one'}; the same "
+          "cut and output bytes both ways\n")
     print("| stage | run | wall s | client CPU s | workers CPU s |")
     print("|---|---|---:|---:|---:|")
     for stage, how, wall, ccpu, wcpu in sorted(rows, key=lambda row: row[0]):

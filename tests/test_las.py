@@ -296,6 +296,60 @@ def test_pieces_packed_elsewhere_write_what_laspy_writes(tmp_path, name, suffix)
     assert sum(h.number_of_points_by_return) == len(sel)
 
 
+def test_chunks_compressed_piece_by_piece_make_the_file_laspy_makes(tmp_path):
+    """LAZ compressed away from the file (a cluster's workers): pieces of any size — empty,
+    inside one chunk, spanning several, ending on a boundary — cut at the file's chunk
+    boundaries, their whole chunks compressed, the chunks that straddle pieces compressed
+    from a tail and the next heads (``straddles``): the file ``write`` makes, and the one
+    laspy's own writer makes of the same points."""
+    import pickle
+
+    from tiledsimplify.io.las_pieces import straddles
+    src, xyz, attrs = whole(LONE_STAR)
+    counts = [0, 61_409, 30_000, 5_000, 0, 3_591, 50_000, 1, 49_999, 120_000, 7, 0, 9_000]
+    cuts = np.concatenate([[0], np.cumsum(counts)])
+    extra = new_dims(int(cuts[-1]), 0)
+    parts = [(xyz[lo:hi], {k: v[lo:hi] for k, v in attrs.items()},
+              {k: v[lo:hi] for k, v in extra.items()}) for lo, hi in itertools.pairwise(cuts)]
+    with LasOutput(tmp_path / "whole.laz", src.template_header()) as out:
+        for part in parts:
+            out.write(*part)
+    with LasOutput(tmp_path / "chunks.laz", src.template_header()) as out:
+        layout = pickle.loads(pickle.dumps(out.layout))
+        chunk = layout.vlr().chunk_size()
+        starts, span = straddles(counts, chunk)
+        # boundaries at 50k (piece 1), 100k and 150k (the first points of pieces 6 and 7),
+        # 200k (piece 9's first), 250k and 300k (inside 9)
+        assert {t: list(r) for t, r in span.items()} == {
+            1: [2, 3, 4, 5, 6], 6: [7], 7: [8, 9], 9: [10, 11, 12]}
+        pieces = [layout.chunked(layout.pack(*part), int(starts[t]))
+                  for t, part in enumerate(parts)]
+        for t, piece in enumerate(pieces):
+            out.write_chunks(piece.data, piece.chunks)
+            out.grow(piece)
+            if t in span:
+                out.write_chunks(*layout.compress([piece.tail]
+                                                  + [pieces[u].head for u in span[t]]))
+    data = (tmp_path / "chunks.laz").read_bytes()
+    assert data == (tmp_path / "whole.laz").read_bytes()
+    back = laspy.read(tmp_path / "chunks.laz")
+    assert len(back.points) == cuts[-1]
+    np.testing.assert_array_equal(np.c_[back.x, back.y, back.z], xyz[:cuts[-1]])
+    with laspy.open(tmp_path / "chunks.laz") as reader:  # seeks by its chunk table
+        reader.seek(150_003)
+        np.testing.assert_array_equal(np.asarray(reader.read_points(4).X),
+                                      np.asarray(back.X[150_003:150_007]))
+    header = laspy.open(tmp_path / "chunks.laz").header
+    plain = laspy.LasData(header)
+    plain.points = back.points
+    plain.write(tmp_path / "laspy.laz")  # laspy's own writer, the same points
+    theirs = (tmp_path / "laspy.laz").read_bytes()
+    other = laspy.open(tmp_path / "laspy.laz").header.offset_to_point_data
+    # the chunks and the chunk table, byte for byte (the 8 bytes before them locate the
+    # table, whose offset follows the header's length)
+    assert data[header.offset_to_point_data + 8:] == theirs[other + 8:]
+
+
 def test_a_piece_of_another_layout_and_ranges_without_values(tmp_path):
     src, xyz, attrs = whole(AUTZEN)
     other, oxyz, oattrs = whole(EXTRA)

@@ -411,6 +411,22 @@ def test_las_ingested_in_parts_by_the_workers_gives_the_same_output(data_dir, tm
         assert (tmp_path / f"{name}.laz").read_bytes() == (tmp_path / "one.laz").read_bytes()
 
 
+def test_laz_compressed_by_the_workers_is_the_synchronous_runs_file(data_dir, tmp_path,
+                                                                    cluster):
+    """On a cluster the workers pack and compress the LAZ output's chunks, those straddling
+    tiles too (``run._write_laz_chunks``): 55,000 points kept from tiles of ~15,000, so
+    chunks of 50,000 span several tiles; the file is the synchronous run's, byte for byte."""
+    src = data_dir / "lidar" / "autzen_trim.laz"
+    kw = {"ratio": 0.5, "tile_points": 30000}
+    base = run(src, tmp_path / "one.laz", scheduler="synchronous", **kw)
+    s = run(src, tmp_path / "cluster.laz", client=cluster, **kw)
+    assert s.n_tiles >= 4 and s.n_output == base.n_output == 55_000
+    assert (tmp_path / "cluster.laz").read_bytes() == (tmp_path / "one.laz").read_bytes()
+    with laspy.open(tmp_path / "cluster.laz") as reader:
+        reader.seek(50_001)  # in the second chunk
+        assert len(reader.read_points(10)) == 10
+
+
 def test_npy_ingested_in_parts_gives_the_same_output(bunny, tmp_path, caplog, monkeypatch):
     import importlib
     run_module = importlib.import_module("tiledsimplify.pipeline.run")

@@ -10,8 +10,10 @@ LasSource(spec, chunk_points=1_000_000)
     as ``(start_index, xyz float64 (m, 3), attrs dict name -> (m,) array)``.
 LasOutput(path, template_header, extra_dims=SIMPLIFY_DIMS)
     Streaming writer (a context manager): ``out.write(xyz, attrs, extra)`` per chunk, or
-    ``out.write_piece(piece)`` for points packed elsewhere by ``out.layout.pack(...)``; the
-    file appears under ``path`` only when the ``with`` block ends without an exception.
+    ``out.write_piece(piece)`` for points packed elsewhere by ``out.layout.pack(...)``, or
+    (LAZ) ``out.write_chunks(...)`` and ``out.grow(piece)`` for LASzip chunks compressed
+    elsewhere (:mod:`.las_pieces`); the file appears under ``path`` only when the ``with``
+    block ends without an exception.
 write_las(path, template_header, xyz, attrs, *, extra, extra_dims=SIMPLIFY_DIMS)
     One-shot wrapper of :class:`LasOutput`.
 SIMPLIFY_DIMS
@@ -81,7 +83,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import FileFormatError, InputError
-from .las_pieces import LasLayout, LasPiece, grow_header
+from .las_pieces import ChunkBackend, LasLayout, LasPiece, grow_header
 from .points_out import publish, write_failed
 
 __all__ = [
@@ -783,6 +785,7 @@ class LasOutput:
         self._writer = None
         self._ranges: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.layout = LasLayout(self.path, header, self.attribute_names, self.extra_names)
+        self._backend = ChunkBackend(self.layout.vlr()) if compress else None
 
         fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".partial",
                                    dir=directory)
@@ -794,7 +797,8 @@ class LasOutput:
             self._unlink_tmp()
             raise
         try:
-            self._writer = laspy.LasWriter(fh, header, do_compress=compress, closefd=True)
+            self._writer = laspy.LasWriter(fh, header, do_compress=compress,
+                                           laz_backend=self._backend, closefd=True)
         except BaseException as exc:
             fh.close()
             self._unlink_tmp()
@@ -853,9 +857,9 @@ class LasOutput:
 
     def write_piece(self, piece: LasPiece) -> None:
         """Append points packed by :meth:`.LasLayout.pack` of :attr:`layout` — here or
-        anywhere else, e.g. on a cluster worker. The point records go to laspy's point writer
-        (for LAZ, LASzip's compressor) as they are; the header grows by the piece's summary,
-        as laspy's ``LasHeader.grow`` would by its points (:func:`.las_pieces.grow_header`).
+        anywhere else, e.g. on a cluster worker. The point records go to the point writer
+        (for LAZ, compressed here as their chunks fill); the header grows by the piece's
+        summary, as laspy's ``LasHeader.grow`` would by its points (:meth:`grow`).
 
         Raises
         ------
@@ -868,28 +872,58 @@ class LasOutput:
             raise ValueError(f"{self.path}: LasOutput is closed")
         if not piece.count:
             return
-        header = self._writer.header
-        if header.max_point_count() - header.point_count < piece.count:
-            raise InputError(f"{self.path}: {header.point_count + piece.count} points do not "
-                             f"fit a LAS {header.version} file (at most "
-                             f"{header.max_point_count()}); write LAS 1.4.")
-        fmt = header.point_format
+        fmt = self._writer.header.point_format
         if len(piece.data) != piece.count * fmt.size:
             raise ValueError(f"{self.path}: a piece of {piece.count} points holds "
                              f"{len(piece.data)} bytes, not {piece.count} records of "
                              f"{fmt.size}: packed for another layout")
+        self._check_room(piece.count)
         records = laspy.PackedPointRecord(np.frombuffer(piece.data, fmt.dtype()), fmt)
         try:
             self._writer.point_writer.write_points(records)
         except Exception as exc:
             raise self._write_error(exc) from exc
-        grow_header(header, piece)
+        self.grow(piece)
+
+    def write_chunks(self, data: bytes, table) -> None:
+        """Append LASzip chunks compressed elsewhere (a LAZ output; see
+        :meth:`.LasLayout.chunked` and :meth:`.LasLayout.compress`), with ``table`` their
+        ``(points, bytes)``. They must start at a chunk boundary and all but the file's last
+        be whole; their points count only through :meth:`grow` of the pieces they came
+        from."""
+        if self._finished:
+            raise ValueError(f"{self.path}: LasOutput is closed")
+        if self._backend is None:
+            raise ValueError(f"{self.path}: LASzip chunks for a LAS (uncompressed) output")
+        try:
+            self._backend.writer.write_chunks(data, table)
+        except ValueError:
+            raise
+        except Exception as exc:
+            raise self._write_error(exc) from exc
+
+    def grow(self, piece: LasPiece) -> None:
+        """Count a piece's points in the header (count, bounds, points by return: as laspy's
+        ``LasHeader.grow`` would, :func:`.las_pieces.grow_header`) and the added dimensions'
+        ranges; :meth:`write_piece` calls it, a caller of :meth:`write_chunks` calls it once
+        per piece whose chunks it writes."""
+        if not piece.count:
+            return
+        self._check_room(piece.count)
+        grow_header(self._writer.header, piece)
         for name, (lo, hi) in piece.ranges.items():
             old = self._ranges.get(name)
             if old is not None:
                 lo, hi = np.fmin(old[0], lo), np.fmax(old[1], hi)
             self._ranges[name] = (lo, hi)
         self.count += piece.count
+
+    def _check_room(self, count):
+        header = self._writer.header
+        if header.max_point_count() - header.point_count < count:
+            raise InputError(f"{self.path}: {header.point_count + count} points do not fit a "
+                             f"LAS {header.version} file (at most {header.max_point_count()}); "
+                             "write LAS 1.4.")
 
     def _write_error(self, exc):
         """The error to raise when the writer fails: :func:`.points_out.write_failed`, as for

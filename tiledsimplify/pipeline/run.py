@@ -11,6 +11,7 @@ finished tiles are not recomputed, and the output is rewritten from the stored r
 
 import collections
 import contextlib
+import dataclasses
 import hashlib
 import json
 import logging
@@ -821,16 +822,22 @@ def _kept(ts, tile, prefix, refined):
     return _keep(ts, tile, prefix, refined), ts.read_result(tile, "boundary")
 
 
-def _tile_piece(store_path, tile, prefix, refined, layout, is_las):
+def _tile_piece(store_path, tile, prefix, refined, layout, is_las, start=None, expect=None):
     """What a LAS/LAZ output takes from one tile: ``(piece, boundary count)`` — its kept core
     points packed as the output's point records (:meth:`.LasLayout.pack`: quantised, checked,
     with the three added dimensions; a non-LAS input's points get
     :data:`~tiledsimplify.io.las.NEW_POINT_DEFAULTS`) — or None if it keeps none. Made
-    wherever this runs: on a cluster, a worker, and the client then only compresses and
-    writes (:meth:`.LasOutput.write_piece`)."""
+    wherever this runs: on a cluster, a worker. With ``start``, the file's point where the
+    tile's first kept point goes (a LAZ output on a cluster, :func:`_write_laz_chunks`), the
+    piece is cut at the file's chunk boundaries and its whole chunks compressed
+    (:meth:`.LasLayout.chunked`); it must then keep ``expect`` points."""
     from ..io.las import NEW_POINT_DEFAULTS
     ts = TileStore.open(store_path)
     keep, boundary = _kept(ts, tile, prefix, refined)
+    if expect is not None and int(keep.sum()) != expect:
+        raise TiledSimplifyError(
+            f"{store_path}: tile {tile} keeps {int(keep.sum())} points, not the {expect} its "
+            "cut says (a bug: the output's LAZ chunks would be misplaced)")
     if not keep.any():
         return None
     xyz = ts.core(tile)[0][keep]
@@ -844,7 +851,27 @@ def _tile_piece(store_path, tile, prefix, refined, layout, is_las):
     piece = layout.pack(xyz, attrs, {"sharp_edge": boundary.astype(np.uint8),
                                      "importance": np.full(k, np.nan),
                                      "simplify_rank": np.full(k, -1, dtype=np.int64)})
+    if start is not None:
+        piece = layout.chunked(piece, start)
     return piece, int(boundary.sum())
+
+
+def _piece_part(got, part):
+    """A part of a cut piece (:func:`_tile_piece` with ``start``): ``"head"`` or ``"tail"``
+    (records, for a chunk that straddles pieces), or ``"body"``: the piece without them and
+    its boundary count (what the client writes)."""
+    if got is None:
+        return b"" if part == "head" else None
+    piece, boundary = got
+    if part != "body":
+        return getattr(piece, part)
+    # a copy: the same object may be the head's or tail's task's input in this worker
+    return dataclasses.replace(piece, head=b"", tail=None), boundary
+
+
+def _compress_span(layout, parts):
+    """A LASzip chunk that straddles pieces, from a tail and the following heads."""
+    return layout.compress(parts)
 
 
 #: tiles read ahead of the one being written, per worker (each a tile's kept records)
@@ -909,6 +936,8 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
             lo, hi = ts.root_attrs["bounds"]
             template = new_header(lo, hi, ts.spacing)
         with LasOutput(output, template) as out:
+            if client is not None and output.suffix.lower() == ".laz":
+                return _write_laz_chunks(ts, out, prefix, refined, source.is_las, client)
             for got in _in_tile_order(
                     _tile_piece, lambda i: (path, i, prefix, refined, out.layout, source.is_las),
                     ts.n_tiles, client):
@@ -932,6 +961,57 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
                 "sharp_edge": boundary.astype(np.uint8),
                 "nx": nrm[:, 0], "ny": nrm[:, 1], "nz": nrm[:, 2]})
             n_boundary += int(boundary.sum())
+    return n_out, n_boundary
+
+
+def _write_laz_chunks(ts, out, prefix, refined, is_las, client):
+    """A LAZ output on a cluster, compressed by its workers: each tile's kept points are
+    packed and cut at the file's chunk boundaries there (:func:`_tile_piece` with the file's
+    point where they start: a tile keeps its core count less its cut, the refinement swaps at
+    equal count), its whole chunks compressed; each chunk that straddles tiles is compressed
+    by a task from the tail of one and the heads of the next (:func:`_compress_span`). The
+    client writes the chunks in order and grows the header by each tile's summary: the file
+    laspy would write (:class:`.las_pieces.ChunkWriter`). ``READ_AHEAD`` tiles per worker
+    thread are in flight. Returns ``(points, boundary points)``."""
+    from ..io.las_pieces import straddles
+    n = ts.n_tiles
+    counts = [ts.count(t) - int(prefix[t]) for t in range(n)]
+    starts, span = straddles(counts, out.layout.vlr().chunk_size())
+    path = str(ts.path)
+    ahead = READ_AHEAD * max(1, sum(client.nthreads().values()))
+    pieces, bodies, spans = {}, {}, {}
+    straddling = sorted(span)
+    made = [0, 0]  # pieces submitted, straddling chunks submitted
+
+    def submit(upto):
+        while made[0] < min(upto, n):
+            t = made[0]
+            pieces[t] = client.submit(_tile_piece, path, t, prefix, refined, out.layout,
+                                      is_las, int(starts[t]), counts[t], pure=False)
+            bodies[t] = client.submit(_piece_part, pieces[t], "body", pure=False)
+            made[0] += 1
+        while made[1] < len(straddling) and span[straddling[made[1]]].stop <= made[0]:
+            t = straddling[made[1]]
+            parts = [client.submit(_piece_part, pieces[t], "tail", pure=False)]
+            parts += [client.submit(_piece_part, pieces[u], "head", pure=False)
+                      for u in span[t]]
+            spans[t] = client.submit(_compress_span, out.layout, parts, pure=False)
+            made[1] += 1
+
+    n_out = n_boundary = 0
+    for t in range(n):
+        submit(t + ahead)
+        got = bodies.pop(t).result()
+        if got is not None:
+            piece, boundary = got
+            out.write_chunks(piece.data, piece.chunks)
+            out.grow(piece)
+            n_out += piece.count
+            n_boundary += boundary
+        if t in span:
+            submit(span[t].stop)
+            out.write_chunks(*spans.pop(t).result())
+        del pieces[t]  # its parts are asked for: dask keeps what they still need
     return n_out, n_boundary
 
 
