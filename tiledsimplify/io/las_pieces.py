@@ -42,15 +42,16 @@ class LasPiece:
     """Consecutive points of a LAS/LAZ file as packed point records, and what its header
     needs of them.
 
-    ``data``: the point records' bytes (the layout's point format); ``grid_min`` / ``grid_max``: the
-    least and largest quantised X, Y, Z; ``returns[r]``: points with return number ``r``;
-    ``ranges``: the least and largest
-    raw value of each extra-bytes dimension, per element (NaN where none is valid).
+    ``data``: the point records' bytes (the layout's point format); ``grid_min`` /
+    ``grid_max``: the least and largest quantised X, Y, Z; ``returns[r]``: points with return
+    number ``r``; ``ranges``: the least and largest raw value of each extra-bytes dimension,
+    per element (NaN where none is valid).
 
-    Cut at the file's chunk boundaries (:meth:`LasLayout.chunked`), ``data`` holds the whole
-    LASzip chunks the piece spans, ``chunks`` their ``(points, bytes)``, ``head`` the records
-    before its first boundary (all of them if it holds none) and ``tail`` those from its last
-    boundary on (None if it holds none); the summary stays that of every point."""
+    Cut at the file's chunk boundaries (:meth:`LasLayout.chunked`, in place), ``data`` holds
+    the whole LASzip chunks the piece spans, ``chunks`` their ``(points, bytes)``, ``head``
+    the records before its first boundary (all of them if it holds none) and ``tail`` those
+    from its last boundary on (None if it holds none); the summary stays that of every
+    point."""
 
     count: int
     data: bytes
@@ -83,7 +84,8 @@ class LasLayout:
 
     def chunked(self, piece: LasPiece, start: int) -> LasPiece:
         """``piece``, whose first point is the file's point ``start``, cut at the file's
-        chunk boundaries, its whole chunks compressed (see :class:`LasPiece`)."""
+        chunk boundaries, its whole chunks compressed (see :class:`LasPiece`); in place,
+        returned."""
         vlr = self.vlr()
         size = self.header.point_format.size
         chunk = vlr.chunk_size()

@@ -449,9 +449,9 @@ def _lay_out_tiles(store, tiles, spec, chunk_rows: int, rows: int, made: bool = 
                    progress=None):
     """Lay out the groups and empty arrays of ``tiles`` (``rows`` rows each, in chunks of
     ``chunk_rows``) in the store at ``store`` (a path or a ``LocalStore``; its ``tiles``
-    group made), at once (zarr's concurrent metadata writes); with ``made``, return the nodes by name, else
-    ``{"points": 0}`` (a ``map_parts`` task of :meth:`TileStore.create`: parts of the layout
-    then run where the parts of the input do)."""
+    group made), at once (zarr's concurrent metadata writes); with ``made``, return the
+    nodes by name, else ``{"points": 0}`` (a ``map_parts`` task of :meth:`TileStore.create`:
+    parts of the layout then run where the parts of the input do)."""
     if not isinstance(store, LocalStore):
         store = LocalStore(store)
     templates = TileStore._array_templates(spec, chunk_rows, rows)
