@@ -925,7 +925,8 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
     (:class:`.input_order.InputRanks`, :class:`~tiledsimplify.io.points_out.PointsAt`), in
     memory bounded by a tile; on a cluster the tiles' kept records are read — and for
     LAS/LAZ packed as point records (:func:`_tile_piece`) — ahead by its workers
-    (:func:`_in_tile_order`)."""
+    (:func:`_in_tile_order`), which also compress a LAZ output's chunks
+    (:func:`_write_laz_chunks`)."""
     n_out = n_boundary = 0
     path = str(ts.path)
     if output.suffix.lower() in LAS_SUFFIXES:
