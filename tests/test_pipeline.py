@@ -759,3 +759,32 @@ def test_a_run_stopped_in_its_ingest_ingests_again_and_an_empty_store_dir_is_use
     run(path, tmp_path / "fresh.npy", ratio=0.2, tile_points=3000, chunk_points=1000,
         store=tmp_path / "made")
     assert (tmp_path / "o.npy").read_bytes() == (tmp_path / "fresh.npy").read_bytes()
+
+
+def test_a_long_output_logs_its_progress(bunny, tmp_path, caplog, monkeypatch):
+    """The output stage logs every tenth of the kept points written (and, for text, formatted)
+    once it has run ``OUTPUT_QUIET`` seconds (0 here); a run's count is the last line's."""
+    import importlib
+    run_module = importlib.import_module("tiledsimplify.pipeline.run")
+    from tiledsimplify.io import points_out
+    monkeypatch.setattr(run_module, "OUTPUT_QUIET", 0.0)
+    monkeypatch.setattr(points_out, "TEXT_CHUNK", 1000)
+    _, path = bunny
+    for suffix, verbs in [(".laz", ["written"]), (".npy", ["written"]),
+                          (".xyz", ["written", "formatted as text"])]:
+        caplog.clear()
+        with caplog.at_level("INFO", logger="tiledsimplify"):
+            s = run(path, tmp_path / f"out{suffix}", ratio=0.15, tile_points=1500,
+                    workers=2)
+        lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("output:")]
+        for verb in verbs:
+            mine = [m for m in lines if m.split(" points) ")[1].startswith(verb)]
+            shares = [int(m.split()[1]) for m in mine]
+            assert shares == sorted(set(shares)) and shares[-1] == 100, (suffix, verb, lines)
+            assert f"({s.n_output:,} of {s.n_output:,} points)" in mine[-1]
+        assert len(lines) <= 10 * len(verbs)
+    monkeypatch.setattr(run_module, "OUTPUT_QUIET", 3600.0)  # a short output stays quiet
+    caplog.clear()
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        run(path, tmp_path / "quiet.npy", ratio=0.15, tile_points=1500, workers=2)
+    assert not any(r.getMessage().startswith("output:") for r in caplog.records)

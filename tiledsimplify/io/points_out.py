@@ -264,12 +264,15 @@ class PointsAt:
         Number of records.
     dtypes : dict of name -> dtype
         The columns after x, y, z, in order.
+    progress : callable, optional
+        ``progress(records)`` after each :data:`TEXT_CHUNK` records formatted as text.
     """
 
-    def __init__(self, path, n, dtypes):
+    def __init__(self, path, n, dtypes, progress=None):
         self.path = Path(path)
         self.suffix = _check_suffix(self.path, SUFFIXES)
         self.n = int(n)
+        self.progress = progress
         self.dtype = _fields(dtypes)
         self._stack = None
         self._records = None
@@ -326,6 +329,8 @@ class PointsAt:
             fh.write((sep.join(self.dtype.names) + "\n").encode())
             for start in range(0, self.n, TEXT_CHUNK):
                 _write_text(fh, np.asarray(records[start:start + TEXT_CHUNK]), sep, header=False)
+                if self.progress is not None:
+                    self.progress(min(start + TEXT_CHUNK, self.n))
 
     def __exit__(self, kind, value, tb):
         try:

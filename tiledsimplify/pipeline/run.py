@@ -171,6 +171,34 @@ class _Progress:
             self.out.flush()
 
 
+#: the output stage logs its progress (every tenth of the kept points written) only once it
+#: has run this long: a short one stays one line in the run's summary
+OUTPUT_QUIET = 10.0
+
+
+class _Written:
+    """The output stage's progress: ``written(points so far)`` logs a line at every tenth of
+    the ``total`` kept points, once it has run :data:`OUTPUT_QUIET` seconds (writing 200M kept
+    points of a billion takes minutes, with no task per point to count); ``verb`` says what
+    was done to them (text outputs are formatted at the end, ~5 µs a point)."""
+
+    def __init__(self, total, verb="written"):
+        self.total, self.verb, self.tenths, self.t0 = int(total), verb, 0, time.perf_counter()
+
+    def __call__(self, done):
+        tenths = 10 * done // self.total if self.total else 10
+        if tenths <= self.tenths:
+            return
+        elapsed = time.perf_counter() - self.t0
+        if elapsed < OUTPUT_QUIET:
+            return
+        self.tenths = tenths
+        frac = done / self.total if self.total else 1.0
+        left = f", ~{_duration(elapsed * (1 - frac) / frac)} left" if 0 < frac < 1 else ""
+        log.info("output: %d %% (%s of %s points) %s in %s%s", 100 * frac, f"{done:,}",
+                 f"{self.total:,}", self.verb, _duration(elapsed), left)
+
+
 def _duration(seconds):
     """``41 s``, ``12.3 min`` or ``2.1 h``."""
     if seconds < 90:
@@ -929,6 +957,7 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
     (:func:`_write_laz_chunks`)."""
     n_out = n_boundary = 0
     path = str(ts.path)
+    written = _Written(sum(ts.count(t) - int(prefix[t]) for t in range(ts.n_tiles)))
     if output.suffix.lower() in LAS_SUFFIXES:
         from ..io.las import LasOutput, new_header
         if source.is_las:
@@ -938,7 +967,8 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
             template = new_header(lo, hi, ts.spacing)
         with LasOutput(output, template) as out:
             if client is not None and output.suffix.lower() == ".laz":
-                return _write_laz_chunks(ts, out, prefix, refined, source.is_las, client)
+                return _write_laz_chunks(ts, out, prefix, refined, source.is_las, client,
+                                         written)
             for got in _in_tile_order(
                     _tile_piece, lambda i: (path, i, prefix, refined, out.layout, source.is_las),
                     ts.n_tiles, client):
@@ -948,6 +978,7 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
                 out.write_piece(piece)
                 n_out += piece.count
                 n_boundary += boundary
+                written(n_out)
         return n_out, n_boundary
     # in input order, a tile at a time
     ranks = InputRanks(ts.n_total)
@@ -955,17 +986,21 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
                                 ts.n_tiles, client):
         ranks.add(index)
     n_out = len(ranks)
-    with PointsAt(output, n_out, OUTPUT_COLUMNS) as out:
+    done = 0
+    with PointsAt(output, n_out, OUTPUT_COLUMNS, progress=_Written(n_out, "formatted as text")
+                  ) as out:
         for idx, xyz, boundary, nrm in _in_tile_order(
                 _tile_points, lambda i: (path, i, prefix, refined), ts.n_tiles, client):
             out.write(ranks.rank(idx), xyz, {
                 "sharp_edge": boundary.astype(np.uint8),
                 "nx": nrm[:, 0], "ny": nrm[:, 1], "nz": nrm[:, 2]})
             n_boundary += int(boundary.sum())
+            done += len(idx)
+            written(done)
     return n_out, n_boundary
 
 
-def _write_laz_chunks(ts, out, prefix, refined, is_las, client):
+def _write_laz_chunks(ts, out, prefix, refined, is_las, client, written=None):
     """A LAZ output on a cluster, compressed by its workers: each tile's kept points are
     packed and cut at the file's chunk boundaries there (:func:`_tile_piece` with the file's
     point where they start: a tile keeps its core count less its cut, the refinement swaps at
@@ -1009,6 +1044,8 @@ def _write_laz_chunks(ts, out, prefix, refined, is_las, client):
             out.grow(piece)
             n_out += piece.count
             n_boundary += boundary
+            if written is not None:
+                written(n_out)
         if t in span:
             submit(span[t].stop)
             out.write_chunks(*spans.pop(t).result())
