@@ -83,7 +83,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import FileFormatError, InputError
-from .las_pieces import ChunkBackend, LasLayout, LasPiece, grow_header
+from .las_pieces import _INT32, _XYZ, ChunkBackend, LasLayout, LasPiece, grow_header
 from .points_out import publish, write_failed
 
 __all__ = [
@@ -106,9 +106,7 @@ SIMPLIFY_DIMS = (
     ("simplify_rank", "int64", "Removal order; -1 = kept"),
 )
 
-_XYZ = ("X", "Y", "Z")
 _GLOB_CHARS = re.compile(r"[*?\[]")
-_INT32 = np.iinfo(np.int32)
 _FIX_READ = ("The file may be truncated or corrupt: compare its size with the original, copy or "
              "export it again, or check it with `pdal info` / `lasinfo`.")
 
@@ -877,13 +875,12 @@ class LasOutput:
             raise ValueError(f"{self.path}: a piece of {piece.count} points holds "
                              f"{len(piece.data)} bytes, not {piece.count} records of "
                              f"{fmt.size}: packed for another layout")
-        self._check_room(piece.count)
+        self.grow(piece)  # checks the room first; a failed write below aborts the file
         records = laspy.PackedPointRecord(np.frombuffer(piece.data, fmt.dtype()), fmt)
         try:
             self._writer.point_writer.write_points(records)
         except Exception as exc:
             raise self._write_error(exc) from exc
-        self.grow(piece)
 
     def write_chunks(self, data: bytes, table) -> None:
         """Append LASzip chunks compressed elsewhere (a LAZ output; see
@@ -909,21 +906,18 @@ class LasOutput:
         per piece whose chunks it writes."""
         if not piece.count:
             return
-        self._check_room(piece.count)
-        grow_header(self._writer.header, piece)
+        header = self._writer.header
+        if header.max_point_count() - header.point_count < piece.count:
+            raise InputError(f"{self.path}: {header.point_count + piece.count} points do not "
+                             f"fit a LAS {header.version} file (at most "
+                             f"{header.max_point_count()}); write LAS 1.4.")
+        grow_header(header, piece)
         for name, (lo, hi) in piece.ranges.items():
             old = self._ranges.get(name)
             if old is not None:
                 lo, hi = np.fmin(old[0], lo), np.fmax(old[1], hi)
             self._ranges[name] = (lo, hi)
         self.count += piece.count
-
-    def _check_room(self, count):
-        header = self._writer.header
-        if header.max_point_count() - header.point_count < count:
-            raise InputError(f"{self.path}: {header.point_count + count} points do not fit a "
-                             f"LAS {header.version} file (at most {header.max_point_count()}); "
-                             "write LAS 1.4.")
 
     def _write_error(self, exc):
         """The error to raise when the writer fails: :func:`.points_out.write_failed`, as for

@@ -957,7 +957,9 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
     (:func:`_write_laz_chunks`)."""
     n_out = n_boundary = 0
     path = str(ts.path)
-    written = _Written(sum(ts.count(t) - int(prefix[t]) for t in range(ts.n_tiles)))
+    # a tile keeps its core count less its cut (the refinement swaps at equal count)
+    counts = [ts.count(t) - int(prefix[t]) for t in range(ts.n_tiles)]
+    written = _Written(sum(counts))
     if output.suffix.lower() in LAS_SUFFIXES:
         from ..io.las import LasOutput, new_header
         if source.is_las:
@@ -968,7 +970,7 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
         with LasOutput(output, template) as out:
             if client is not None and output.suffix.lower() == ".laz":
                 return _write_laz_chunks(ts, out, prefix, refined, source.is_las, client,
-                                         written)
+                                         counts, written)
             for got in _in_tile_order(
                     _tile_piece, lambda i: (path, i, prefix, refined, out.layout, source.is_las),
                     ts.n_tiles, client):
@@ -1000,18 +1002,16 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
     return n_out, n_boundary
 
 
-def _write_laz_chunks(ts, out, prefix, refined, is_las, client, written=None):
-    """A LAZ output on a cluster, compressed by its workers: each tile's kept points are
-    packed and cut at the file's chunk boundaries there (:func:`_tile_piece` with the file's
-    point where they start: a tile keeps its core count less its cut, the refinement swaps at
-    equal count), its whole chunks compressed; each chunk that straddles tiles is compressed
+def _write_laz_chunks(ts, out, prefix, refined, is_las, client, counts, written):
+    """A LAZ output on a cluster, compressed by its workers: each tile's kept points
+    (``counts``) are packed and cut at the file's chunk boundaries there (:func:`_tile_piece`
+    with the file's point where they start), its whole chunks compressed; each chunk that straddles tiles is compressed
     by a task from the tail of one and the heads of the next (:func:`_compress_span`). The
     client writes the chunks in order and grows the header by each tile's summary: the file
     laspy would write (:class:`.las_pieces.ChunkWriter`). ``READ_AHEAD`` tiles per worker
     thread are in flight. Returns ``(points, boundary points)``."""
     from ..io.las_pieces import straddles
     n = ts.n_tiles
-    counts = [ts.count(t) - int(prefix[t]) for t in range(n)]
     starts, span = straddles(counts, out.layout.vlr().chunk_size())
     path = str(ts.path)
     ahead = READ_AHEAD * max(1, sum(client.nthreads().values()))
@@ -1044,8 +1044,7 @@ def _write_laz_chunks(ts, out, prefix, refined, is_las, client, written=None):
             out.grow(piece)
             n_out += piece.count
             n_boundary += boundary
-            if written is not None:
-                written(n_out)
+            written(n_out)
         if t in span:
             submit(span[t].stop)
             out.write_chunks(*spans.pop(t).result())
