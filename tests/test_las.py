@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -189,6 +190,59 @@ def test_mixed_point_formats_read_but_do_not_write(tmp_path):
     assert len(xyz) == 500 and all(len(v) == 500 for v in attrs.values())
     with pytest.raises(FileFormatError, match=r"b\.las.*a\.las.*PDAL|b\.las.*a\.las.*pdal"):
         src.template_header()
+
+
+@pytest.mark.parametrize("case", ["formats", "dimension"])
+def test_run_refuses_an_output_layout_before_the_work(tmp_path, case):
+    """What the LAS writer would refuse at the end of a run — files of two point formats, or
+    an input dimension named as one the output adds but of another type — is refused before
+    the ingest: no tile store, no output (it used to fail after the whole run)."""
+    from tiledsimplify.pipeline import run
+    folder = tmp_path / "in"
+    folder.mkdir()
+    small_las(folder / "a.las", AUTZEN, slice(0, 3000))
+    if case == "formats":
+        small_las(folder / "b.las", LONE_STAR, slice(0, 2000))
+        error, match = FileFormatError, r"b\.las.*a\.las.*same point format"
+    else:
+        las = laspy.read(folder / "a.las")
+        las.add_extra_dim(laspy.ExtraBytesParams(name="importance", type=np.float32))
+        las.write(folder / "a.las")
+        error, match = InputError, (r"out\.laz: the template already has an extra dimension "
+                                    r"of that name of type float32")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # different CRS
+        with pytest.raises(error, match=match):
+            run(folder, tmp_path / "out.laz", ratio=0.5, store=tmp_path / "store")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+    if case == "dimension":  # the same input to a non-LAS output keeps no such dimension: runs
+        run(folder, tmp_path / "out.npy", ratio=0.5)
+        assert len(np.load(tmp_path / "out.npy")) == 1500
+
+
+def test_run_refuses_files_off_the_output_grid_before_the_tiles(tmp_path, caplog):
+    """Two files of one layout, the second 1e8 m away with its own offsets: the output takes
+    the first file's grid (scale 0.01, int32), which cannot hold both. Refused right after the
+    ingest (from the bounds it read), before any tile runs, naming the output; no output."""
+    import logging
+
+    from tiledsimplify.pipeline import run
+    folder = tmp_path / "in"
+    folder.mkdir()
+    small_las(folder / "a.las", AUTZEN, slice(0, 3000))
+    las = laspy.read(folder / "a.las")
+    far = laspy.LasData(las.header)
+    far.points = las.points[:]
+    with np.errstate(invalid="ignore"):  # the old x overflow the new grid until set again
+        far.change_scaling(offsets=np.asarray(las.header.offsets) + [1e8, 0.0, 0.0])
+    far.x = las.x + 1e8
+    far.write(folder / "b.las")
+    with caplog.at_level(logging.INFO, logger="tiledsimplify"):
+        with pytest.raises(InputError, match=r"out\.laz: coordinates .* do not fit the output's "
+                                             r"int32 grid \(scales \[0\.01 0\.01 0\.01\]"):
+            run(folder, tmp_path / "out.laz", ratio=0.5, store=tmp_path / "store")
+    assert "ingested 6,000 points" in caplog.text and "tile 0" not in caplog.text
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".store.lock", "in", "store"]
 
 
 # --------------------------------------------------------------------------------------

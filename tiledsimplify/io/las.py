@@ -16,6 +16,8 @@ LasOutput(path, template_header, extra_dims=SIMPLIFY_DIMS)
     block ends without an exception.
 write_las(path, template_header, xyz, attrs, *, extra, extra_dims=SIMPLIFY_DIMS)
     One-shot wrapper of :class:`LasOutput`.
+output_header(template_header, extra_dims=SIMPLIFY_DIMS, path=None)
+    The layout :class:`LasOutput` would write, without a file: a run checks it before the work.
 SIMPLIFY_DIMS
     The three extra-bytes dimensions the simplifier adds: ``sharp_edge`` (uint8, 1 on or near a
     sharp edge), ``importance`` (float64, importance at removal, NaN for kept points) and
@@ -685,6 +687,43 @@ def _as_params(dim) -> laspy.ExtraBytesParams:
                                   description=rest[0] if rest else "")
 
 
+def output_header(template_header: laspy.LasHeader, extra_dims=SIMPLIFY_DIMS, path=None):
+    """The layout :class:`LasOutput` writes: a copy of ``template_header`` with ``extra_dims``
+    added (one the template already has with the same type is reused). No file is touched, so
+    a run can check its output's layout before the work (``path`` only names it in errors).
+
+    Returns
+    -------
+    (laspy.LasHeader, list of str)
+        The header and the added dimensions' names.
+
+    Raises
+    ------
+    InputError
+        Repeated names, or an added dimension that clashes with a standard dimension or with
+        an extra dimension of another type.
+    """
+    header = copy.deepcopy(template_header)
+    params = [_as_params(d) for d in extra_dims]
+    names = [p.name for p in params]
+    if len(set(names)) != len(names):
+        raise InputError(f"extra_dims has repeated names: {names}")
+    existing = {d.name: d for d in header.point_format.dimensions}
+    new = []
+    for p in params:
+        dim = existing.get(p.name)
+        if dim is None:
+            new.append(p)
+        elif dim.is_standard or np.dtype(dim.dtype) != p.type:
+            raise InputError(
+                f"cannot add dimension {p.name!r} ({p.type}) to {path or 'the output'}: the "
+                f"template already has {'a standard' if dim.is_standard else 'an extra'} "
+                f"dimension of that name of type {dim.dtype}; rename the added dimension.")
+    if new:
+        header.add_extra_dims(new)
+    return header, names
+
+
 class LasOutput:
     """Stream points into a LAS/LAZ file laid out like a template header, plus extra dims.
 
@@ -752,24 +791,7 @@ class LasOutput:
             raise ImportError(f"{self.path}: writing .laz needs a LAZ backend: "
                               "pip install 'laspy[lazrs]'")
 
-        header = copy.deepcopy(template_header)
-        params = [_as_params(d) for d in extra_dims]
-        names = [p.name for p in params]
-        if len(set(names)) != len(names):
-            raise InputError(f"extra_dims has repeated names: {names}")
-        existing = {d.name: d for d in header.point_format.dimensions}
-        new = []
-        for p in params:
-            dim = existing.get(p.name)
-            if dim is None:
-                new.append(p)
-            elif dim.is_standard or np.dtype(dim.dtype) != p.type:
-                raise InputError(
-                    f"cannot add dimension {p.name!r} ({p.type}) to {self.path}: the template "
-                    f"already has a {'standard' if dim.is_standard else 'extra'} dimension of "
-                    f"that name of type {dim.dtype}; rename the added dimension.")
-        if new:
-            header.add_extra_dims(new)
+        header, names = output_header(template_header, extra_dims, self.path)
         header.generating_software = f"tiledsimplify {__version__}"[:32]
         header.creation_date = datetime.date.today()
         evlrs = header.evlrs if header.version.minor >= 4 else None

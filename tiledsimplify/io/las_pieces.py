@@ -64,6 +64,25 @@ class LasPiece:
     tail: bytes | None = None
 
 
+def off_grid(path, lo, hi, scales, offsets):
+    """The error for coordinates ``lo .. hi`` that do not fit the output's int32 grid."""
+    return InputError(
+        f"{path}: coordinates {np.asarray(lo)} .. {np.asarray(hi)} do not fit the output's int32 "
+        f"grid (scales {np.asarray(scales)}, offsets {np.asarray(offsets)}); points of another "
+        "file far from the first one? Rescale the inputs to common offsets first (e.g. `pdal "
+        "translate --writers.las.offset_x=auto ...`).")
+
+
+def fits_grid(lo, hi, scales, offsets):
+    """Whether every coordinate within ``lo .. hi`` quantises (``round((x - offset) /
+    scale)``, as :meth:`LasLayout.pack` does) into int32."""
+    scales = np.asarray(scales, dtype=np.float64)
+    offsets = np.asarray(offsets, dtype=np.float64)
+    low = np.round((np.asarray(lo, dtype=np.float64) - offsets) / scales)
+    high = np.round((np.asarray(hi, dtype=np.float64) - offsets) / scales)
+    return bool((low >= _INT32.min).all() and (high <= _INT32.max).all())
+
+
 class LasLayout:
     """How points become a LAS/LAZ file's bytes: the output header (point format, scales,
     offsets, dimensions) and the names :meth:`pack` expects. Holds only the header and
@@ -135,11 +154,7 @@ class LasLayout:
             raise InputError(f"{path}: xyz has NaN or infinite coordinates")
         low, high = grid.min(axis=0), grid.max(axis=0)
         if (low < _INT32.min).any() or (high > _INT32.max).any():
-            raise InputError(
-                f"{path}: coordinates {xyz.min(axis=0)} .. {xyz.max(axis=0)} do not fit "
-                f"the output's int32 grid (scales {scales}, offsets {offsets}); points of "
-                "another file far from the first one? Rescale the inputs to common offsets "
-                "first (e.g. `pdal translate --writers.las.offset_x=auto ...`).")
+            raise off_grid(path, xyz.min(axis=0), xyz.max(axis=0), scales, offsets)
         rec = laspy.ScaleAwarePointRecord.zeros(m, header=header)
         for axis, dim in enumerate(_XYZ):
             rec[dim] = grid[:, axis].astype(np.int32)

@@ -580,6 +580,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
                          f"first runs down to), got {floor!r}; the default is 0.5.")
     check_output(output, LAS_SUFFIXES)
+    _check_layout(output, source)
     _check_room(output, target * _record_bytes(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
     if workers is not None and workers < 1:
@@ -654,6 +655,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                      time.perf_counter() - clock[0],
                      "" if parts is None else f", {len(parts)} parts read at once")
         stage("ingest")
+        _check_grid(output, source, ts)
         if warming is not None:  # the kernels' first compile, started before the ingest
             warming.join()
             stage("compile")
@@ -809,6 +811,28 @@ OUTPUT_COLUMNS = {"sharp_edge": np.uint8, "nx": NORMAL_DTYPE, "ny": NORMAL_DTYPE
 #: coordinates, input indices and per-point results took 43 B a point for the 1M scan of
 #: ``benchmarks/pipeline_speed.py`` and lone-star.laz, 51 B for autzen_trim.laz
 STORE_BYTES = 20
+
+
+def _check_layout(output, source):
+    """Refuse now, not after the work, a LAS/LAZ output the writer would refuse at the end:
+    input files of different point formats or dimensions (no one layout holds them), or an
+    input dimension that clashes with one the output adds (:func:`.las.output_header`)."""
+    if output.suffix.lower() in LAS_SUFFIXES and source.is_las:
+        from ..io.las import output_header
+        output_header(source.template_header(), path=output)
+
+
+def _check_grid(output, source, ts):
+    """After the ingest, before the tiles: refuse a LAS/LAZ output whose grid (the first
+    file's scales and offsets) cannot hold the input's coordinates — files far apart with
+    their own offsets. The bounds are those the ingest read from the points (headers' bounds
+    may be wrong or zero)."""
+    if output.suffix.lower() in LAS_SUFFIXES and source.is_las:
+        from ..io.las_pieces import fits_grid, off_grid
+        header = source.template_header()
+        lo, hi = ts.root_attrs["bounds"]
+        if not fits_grid(lo, hi, header.scales, header.offsets):
+            raise off_grid(output, lo, hi, header.scales, header.offsets)
 
 
 def _check_room(output, output_bytes, store, n):
