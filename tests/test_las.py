@@ -237,10 +237,10 @@ def test_run_refuses_files_off_the_output_grid_before_the_tiles(tmp_path, caplog
         far.change_scaling(offsets=np.asarray(las.header.offsets) + [1e8, 0.0, 0.0])
     far.x = las.x + 1e8
     far.write(folder / "b.las")
-    with caplog.at_level(logging.INFO, logger="tiledsimplify"):
-        with pytest.raises(InputError, match=r"out\.laz: coordinates .* do not fit the output's "
-                                             r"int32 grid \(scales \[0\.01 0\.01 0\.01\]"):
-            run(folder, tmp_path / "out.laz", ratio=0.5, store=tmp_path / "store")
+    with caplog.at_level(logging.INFO, logger="tiledsimplify"), pytest.raises(
+            InputError, match=r"out\.laz: coordinates .* do not fit the output's int32 grid "
+                              r"\(scales \[0\.01 0\.01 0\.01\]"):
+        run(folder, tmp_path / "out.laz", ratio=0.5, store=tmp_path / "store")
     assert "ingested 6,000 points" in caplog.text and "tile 0" not in caplog.text
     assert sorted(p.name for p in tmp_path.iterdir()) == [".store.lock", "in", "store"]
 
