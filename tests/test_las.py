@@ -245,6 +245,62 @@ def test_run_refuses_files_off_the_output_grid_before_the_tiles(tmp_path, caplog
     assert sorted(p.name for p in tmp_path.iterdir()) == [".store.lock", "in", "store"]
 
 
+def test_run_refuses_to_write_over_its_input(tmp_path, monkeypatch):
+    """The output named as the input — the same path, or another spelling of it (``..``, a
+    linked directory) — is refused before the work, and the input is left as it was (it used
+    to be replaced by the output at the end of the run). The in-memory command refuses it
+    too. A link to the input is another name: writing it replaces the link, not the input."""
+    from tiledsimplify.cli import main
+    from tiledsimplify.pipeline import run
+    src = small_las(tmp_path / "a.las", AUTZEN, slice(0, 2000))
+    before = (tmp_path / "a.las").read_bytes()
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "dirlink").symlink_to(tmp_path, target_is_directory=True)
+    (tmp_path / "link.las").symlink_to(tmp_path / "a.las")
+    monkeypatch.chdir(tmp_path)
+    for out in (tmp_path / "a.las", "./a.las", tmp_path / "sub" / ".." / "a.las",
+                tmp_path / "dirlink" / "a.las"):
+        with pytest.raises(InputError, match=r"a\.las: is the input file .*a\.las; the output "
+                                             r"would replace it"):
+            run(tmp_path / "a.las" if out != "./a.las" else "a.las", out, ratio=0.5)
+    assert (tmp_path / "a.las").read_bytes() == before
+    run(tmp_path / "a.las", tmp_path / "link.las", ratio=0.5)
+    assert (tmp_path / "a.las").read_bytes() == before
+    assert not (tmp_path / "link.las").is_symlink()
+    assert laspy.read(tmp_path / "link.las").header.point_count == 1000
+    np.save(tmp_path / "p.npy", src)
+    assert main(["simplify", "p.npy", "p.npy", "--ratio", "0.5", "-q"]) == 2
+    np.testing.assert_array_equal(np.load(tmp_path / "p.npy"), src)
+
+
+def test_lists_path_and_the_warning_for_an_output_among_the_inputs(tmp_path, caplog):
+    """An output written into the folder (or under the pattern) the input names would be read
+    as one more input file by a later run on the same input: ``lists_path`` says so before it
+    exists, and a run warns."""
+    from tiledsimplify.io.las import lists_path
+    from tiledsimplify.pipeline import run
+    folder = tmp_path / "tiles"
+    folder.mkdir()
+    small_las(folder / "a.las", AUTZEN, slice(0, 2000))
+    assert lists_path(folder, folder / "out.laz") and lists_path(str(folder), folder / "o.LAS")
+    assert lists_path(str(folder / "*.la?"), folder / "out.laz")
+    assert lists_path(str(tmp_path / "**" / "*.laz"), folder / "deep" / "out.laz")
+    assert lists_path([folder / "a.las", folder], folder / "out.laz")
+    assert not lists_path(folder, folder / "out.npy")          # not a LAS file
+    assert not lists_path(folder, tmp_path / "out.laz")        # beside the folder
+    assert not lists_path(folder / "a.las", folder / "out.laz")  # one file named
+    assert not lists_path(str(folder / "*.las"), folder / "out.laz")
+    with caplog.at_level("WARNING", logger="tiledsimplify"):
+        run(folder / "a.las", folder / "out.laz", ratio=0.5)
+        assert "read it as one more input file" not in caplog.text
+        (folder / "out.laz").unlink()
+        run(folder, tmp_path / "out.laz", ratio=0.5)
+        assert "read it as one more input file" not in caplog.text
+        run(folder, folder / "out.laz", ratio=0.5)
+    assert "out.laz: the output goes where the input" in caplog.text
+    assert laspy.read(folder / "out.laz").header.point_count == 1000
+
+
 # --------------------------------------------------------------------------------------
 # writing
 # --------------------------------------------------------------------------------------

@@ -23,7 +23,13 @@ from .core import SimplifyOptions, compile_cache, simplify_points
 from .core.options import MODES
 from .errors import BudgetWarning, InputError, TiledSimplifyError
 from .io import read_points
-from .io.points_out import check_output, check_writable, write_json, write_points
+from .io.points_out import (
+    check_not_input,
+    check_output,
+    check_writable,
+    write_json,
+    write_points,
+)
 from .io.sources import check_finite
 
 log = logging.getLogger("tiledsimplify")
@@ -293,6 +299,7 @@ def _run(args):
 def _simplify(args):
     t0 = time.perf_counter()
     check_output(args.output)
+    check_not_input(args.output, [args.input])
     xyz = check_finite(read_points(args.input), 0, [args.input])
     log.info("read %d points from %s in %.2f s", len(xyz), args.input, time.perf_counter() - t0)
     if len(xyz) == 0:

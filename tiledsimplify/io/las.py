@@ -4,6 +4,8 @@ Public API
 ----------
 las_files(spec) -> list[Path]
     The ``.las``/``.laz`` files named by a file, a folder, a glob pattern or a list of those.
+lists_path(spec, path) -> bool
+    Whether ``las_files(spec)`` would list ``path`` once it exists (an output written there).
 LasSource(spec, chunk_points=1_000_000)
     Describes the input from the file headers alone (files, point count, bounds, point format,
     scales/offsets, CRS, dimension names) and reads it chunk by chunk with :meth:`LasSource.chunks`
@@ -70,6 +72,7 @@ from __future__ import annotations
 import copy
 import datetime
 import errno
+import fnmatch
 import glob
 import itertools
 import os
@@ -147,6 +150,25 @@ def _files_of_one(spec) -> list[Path]:
                                     f"no LAS/LAZ files for pattern {text!r}: {what}", text)
         return found
     raise FileNotFoundError(errno.ENOENT, f"LAS/LAZ input {text!r} does not exist", text)
+
+
+def lists_path(spec, path) -> bool:
+    """Whether :func:`las_files` on ``spec`` would list ``path`` if it existed: a LAS/LAZ
+    file in a folder that ``spec`` names, or matched by a glob pattern of it (or ``path``
+    itself named)."""
+    path = Path(path)
+    if not _is_las(path):
+        return False
+    target = os.path.abspath(path)
+    for one in spec if isinstance(spec, (list, tuple)) else [spec]:
+        text = os.fspath(one)
+        if os.path.abspath(text) == target:
+            return True
+        if Path(text).is_dir() and os.path.abspath(text) == os.path.dirname(target):
+            return True
+        if _GLOB_CHARS.search(text) and fnmatch.fnmatch(target, os.path.abspath(text)):
+            return True  # (fnmatch's * also matches across folders: a superset of glob's)
+    return False
 
 
 def las_files(spec) -> list[Path]:

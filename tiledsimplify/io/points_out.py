@@ -70,6 +70,25 @@ def check_output(path, extra_suffixes=()):
     _check_suffix(Path(path), SUFFIXES + tuple(extra_suffixes))
 
 
+def check_not_input(path, inputs):
+    """Refuse an output that is one of the ``inputs`` files — the same name in the same
+    directory, however spelled (``..``, a linked directory): the finished output would replace
+    the input (another name of the file, a link, keeps it: only that name is replaced).
+    Raises :class:`InputError` naming both."""
+    path = Path(path)
+    for f in inputs:
+        f = Path(f)
+        if path.name != f.name:
+            continue
+        try:
+            same = os.path.samefile(path.absolute().parent, f.absolute().parent)
+        except OSError:  # a directory missing: not the same
+            same = False
+        if same:
+            raise InputError(f"{path}: is the input file {f}; the output would replace it at "
+                             "the end of the run. Write the output to another file.")
+
+
 def check_writable(path):
     """:func:`check_output` without the suffix: ``path`` is not a directory and its
     directory exists and is writable."""

@@ -35,7 +35,13 @@ from ..core.result import resolve_target
 from ..errors import InputError, TiledSimplifyError
 from ..io import points_out
 from ..io.las import LAS_SUFFIXES
-from ..io.points_out import PointsAt, check_output, check_space, record_bytes
+from ..io.points_out import (
+    PointsAt,
+    check_not_input,
+    check_output,
+    check_space,
+    record_bytes,
+)
 from ..io.sources import open_source
 from ..tiles import IncompleteStoreError, TileStore
 from .budget import kept_in_tile, merge_passes, plan_cut, store_pass, store_sequences
@@ -580,6 +586,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
                          f"first runs down to), got {floor!r}; the default is 0.5.")
     check_output(output, LAS_SUFFIXES)
+    check_not_input(output, source.files)
+    _warn_read_back(input, output, source)
     _check_layout(output, source)
     _check_room(output, target * _record_bytes(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
@@ -811,6 +819,18 @@ OUTPUT_COLUMNS = {"sharp_edge": np.uint8, "nx": NORMAL_DTYPE, "ny": NORMAL_DTYPE
 #: coordinates, input indices and per-point results took 43 B a point for the 1M scan of
 #: ``benchmarks/pipeline_speed.py`` and lone-star.laz, 51 B for autzen_trim.laz
 STORE_BYTES = 20
+
+
+def _warn_read_back(input, output, source):
+    """Warn when the output goes where the input names its files (a folder or pattern of
+    LAS/LAZ tiles): a later run on the same input would read it as one more tile."""
+    if source.is_las:
+        from ..io.las import lists_path
+        if lists_path(input, output) and not any(
+                os.path.abspath(f) == os.path.abspath(output) for f in source.files):
+            log.warning("%s: the output goes where the input %s names its files; a later run "
+                        "on the same input will read it as one more input file. Write it to "
+                        "another folder.", output, input)
 
 
 def _check_layout(output, source):
