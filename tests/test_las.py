@@ -157,6 +157,69 @@ def test_parts_read_as_the_whole_from_any_point_of_a_laz(tmp_path):
     assert [len(p.chunks().__next__()[1]) for p in src.parts()] == [CHUNK, CHUNK]
 
 
+def variable_chunk_laz(path, monkeypatch, every):
+    """autzen_trim.laz rewritten as LAZ of chunks of varying size, as COPC files are (LASzip
+    chunk size 2**32 - 1): lazrs told to compress so, a chunk ended every ``every`` points."""
+    import lazrs
+    make = lazrs.LazVlr.new_for_compression
+    monkeypatch.setattr(lazrs.LazVlr, "new_for_compression",
+                        lambda pf, eb, use_variable_size_chunks=False: make(pf, eb, True))
+    src = laspy.read(lidar_file(AUTZEN))
+    with laspy.open(path, mode="w", header=src.header, do_compress=True,
+                    laz_backend=laspy.LazBackend.Lazrs) as w:
+        for lo in range(0, len(src.points), every):
+            w.write_points(src.points[lo:lo + every])
+            w.point_writer.compressor.finish_current_chunk()
+    monkeypatch.undo()
+    return np.c_[src.x, src.y, src.z]
+
+
+def test_laz_of_variable_chunks_is_read_from_its_start(tmp_path, monkeypatch):
+    """A LAZ file whose chunks vary in size (COPC) is one part, read from its start: lazrs
+    seeks such files into the wrong chunk (other points or zeros, no error), so a part read
+    from inside it (an ingest in parts) got wrong points. Its points as the original's."""
+    from tiledsimplify.io.las import variable_chunks
+    expected = variable_chunk_laz(tmp_path / "var.laz", monkeypatch, 30_000)
+    with laspy.open(tmp_path / "var.laz") as r:
+        assert variable_chunks(r.header)
+    with laspy.open(lidar_file(AUTZEN)) as r:
+        assert not variable_chunks(r.header)
+    assert not LasSource(tmp_path / "var.laz").infos[0].seekable
+    with pytest.warns(UserWarning, match="different CRS"):
+        src = LasSource([tmp_path / "var.laz", lidar_file(LONE_STAR)], chunk_points=CHUNK)
+    assert [p.seekable for p in src.infos] == [False, True]
+    parts = src.parts(CHUNK)  # a chunk a part: autzen's 110,000 would be cut at 77,777
+    assert [(p.lo, p.hi) for p in parts[:3]] == [(0, COUNTS[AUTZEN]), (0, CHUNK),
+                                                 (CHUNK, 2 * CHUNK)]
+    xyz = np.concatenate([c[1] for c in parts[0]()])
+    np.testing.assert_allclose(xyz, expected, rtol=0, atol=1e-9)
+
+
+def test_a_copc_inputs_octree_records_are_not_copied(tmp_path):
+    """The "copc" VLR and EVLR describe a COPC file's octree; an output that kept them would
+    be taken for a COPC file. They are dropped from the output's template; others stay."""
+    from tiledsimplify.pipeline import run
+    src = laspy.read(lidar_file(AUTZEN))
+    las = laspy.convert(src, point_format_id=7, file_version="1.4")
+    las.header.vlrs.insert(0, laspy.VLR("copc", 1, "copc info", bytes(160)))
+    las.header.vlrs.append(laspy.VLR("ours", 7, "kept", b"hello"))
+    las.header.evlrs = laspy.vlrs.vlrlist.VLRList([laspy.VLR("copc", 1000, "EPT hierarchy", bytes(32)),
+                                      laspy.VLR("ours", 8, "kept too", b"world")])
+    las.points = las.points[:4000]
+    las.write(tmp_path / "in.laz")
+    with laspy.open(tmp_path / "in.laz") as r:  # as written: the records are there
+        assert "copc" in {v.user_id for v in r.header.vlrs}
+    header = LasSource(tmp_path / "in.laz").template_header()
+    assert [(v.user_id, v.record_id) for v in header.vlrs if v.user_id in ("copc", "ours")] == \
+        [("ours", 7)]
+    assert [(v.user_id, v.record_id) for v in header.evlrs] == [("ours", 8)]
+    run(tmp_path / "in.laz", tmp_path / "out.laz", ratio=0.5)
+    with laspy.open(tmp_path / "out.laz") as r:
+        assert "copc" not in {v.user_id for v in r.header.vlrs}
+        assert [(v.user_id, v.record_id) for v in r.header.evlrs] == [("ours", 8)]
+        assert r.header.point_count == 2000
+
+
 def test_folder_and_glob_read_as_one_cloud(tmp_path):
     folder = tmp_path / "tiles"
     folder.mkdir()

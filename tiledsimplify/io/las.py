@@ -322,6 +322,9 @@ class LasFileInfo:
     compressed : bool
     header : laspy.LasHeader
         The header itself (VLRs, EVLRs, extra-bytes description).
+    seekable : bool
+        Whether its points can be read from any point on (:meth:`LasSource.parts`): False for
+        a LAZ file of chunks of varying size (:func:`variable_chunks`).
     """
 
     path: Path
@@ -337,6 +340,7 @@ class LasFileInfo:
     crs: str | None
     compressed: bool
     header: laspy.LasHeader
+    seekable: bool = True
 
     @property
     def signature(self) -> tuple:
@@ -345,10 +349,35 @@ class LasFileInfo:
                 tuple((d.name, str(d.dtype)) for d in self.header.point_format.dimensions))
 
 
+#: user id of the VLR and EVLR that make a LAZ file a COPC file (its octree's info, hierarchy)
+COPC_USER_ID = "copc"
+#: the LASzip VLR's chunk size of a file whose chunks vary in size (COPC files)
+VARIABLE_CHUNKS = 0xFFFFFFFF
+
+
+def variable_chunks(header: laspy.LasHeader) -> bool:
+    """Whether a LAZ file's chunks vary in size: its LASzip VLR (user ``laszip encoded``,
+    record 22204) gives the chunk size :data:`VARIABLE_CHUNKS` (bytes 12-15 of the record:
+    after the compressor, coder, version and options fields), as every COPC file does.
+
+    lazrs (laspy's LAZ backend; 0.8.2, the newest on PyPI on 2026-12-03) reads such a file in
+    order, but its seek lands in the wrong chunk past the first: on autzen_trim.laz rewritten
+    in 30,000-point chunks, every seek at or after point 30,000 read other points or zeros,
+    without an error. So these files are read from their start only (one part a file).
+    """
+    for vlr in header.vlrs:
+        if vlr.user_id == "laszip encoded" and vlr.record_id == 22204:
+            data = vlr.record_data_bytes()
+            return len(data) >= 16 and int.from_bytes(data[12:16], "little") == VARIABLE_CHUNKS
+    return False
+
+
 def _read_info(path: Path) -> LasFileInfo:
     with _open_reader(path) as reader:
         header = reader.header
         count = int(header.point_count)
+        # before the decoder is built: laspy then takes the LASzip VLR out of the header
+        variable = bool(header.are_points_compressed) and variable_chunks(header)
         if count > 0:
             if header.are_points_compressed:
                 try:  # builds the LAZ decoder: reads the LASzip VLR and the chunk table
@@ -380,6 +409,7 @@ def _read_info(path: Path) -> LasFileInfo:
             crs=crs,
             compressed=bool(header.are_points_compressed),
             header=header,
+            seekable=not variable,
         )
 
 
@@ -580,7 +610,9 @@ class LasSource:
         Returns
         -------
         laspy.LasHeader
-            With VLRs, EVLRs, scales, offsets and the merged extra-bytes description.
+            With VLRs, EVLRs, scales, offsets and the merged extra-bytes description; less a
+            COPC file's ``copc`` VLR and EVLR (:data:`COPC_USER_ID`), which describe its
+            octree, not an output.
 
         Raises
         ------
@@ -599,7 +631,13 @@ class LasSource:
                     "format and dimensions. Merge or convert them to one layout first, e.g. "
                     "`pdal merge a.laz b.laz merged.laz` or `pdal translate in.laz out.laz "
                     "--writers.las.dataformat_id=<id> --writers.las.extra_dims=all`.")
-        return copy.deepcopy(ref.header)
+        header = copy.deepcopy(ref.header)
+        # a COPC input's octree description (the "copc" info VLR and hierarchy EVLR) does
+        # not describe the output: kept, readers would take it for a COPC file
+        for records in (header.vlrs, header.evlrs):
+            if records:
+                records[:] = [r for r in records if r.user_id != COPC_USER_ID]
+        return header
 
     def __repr__(self) -> str:
         return (f"LasSource({len(self.files)} file(s), {self.count} points, point format "
@@ -632,14 +670,16 @@ class LasSource:
 
     def parts(self, max_points: int | None = None) -> list[LasPart]:
         """The input cut in consecutive parts: each file, cut into ranges of at most
-        ``max_points`` (rounded down to whole chunks, at least one; None: whole files).
+        ``max_points`` (rounded down to whole chunks, at least one; None: whole files; a LAZ
+        file of chunks of varying size, e.g. COPC, whole: :func:`variable_chunks`).
         Their chunks, part after part, are :meth:`chunks`'s; each part opens its file itself
         and pickles, so parts can be read at once by threads, processes or cluster workers
         (a parallel ingest, :meth:`.TileStore.create`)."""
         out, first = [], 0
         for info in self.infos:
             count = info.point_count
-            for lo, hi in part_ranges(count, max_points, self.chunk_points):
+            cut = max_points if info.seekable else None  # variable chunks: read from the start
+            for lo, hi in part_ranges(count, cut, self.chunk_points):
                 out.append(LasPart(info.path.absolute(), (info.header.point_format.size, count),
                                    first, lo, hi, self.chunk_points, self._attribute_names))
             first += count
