@@ -195,9 +195,10 @@ def test_laz_of_variable_chunks_is_read_from_its_start(tmp_path, monkeypatch):
     np.testing.assert_allclose(xyz, expected, rtol=0, atol=1e-9)
 
 
-def test_a_copc_inputs_octree_records_are_not_copied(tmp_path):
+def test_a_copc_inputs_octree_records_are_not_copied(tmp_path, caplog):
     """The "copc" VLR and EVLR describe a COPC file's octree; an output that kept them would
-    be taken for a COPC file. They are dropped from the output's template; others stay."""
+    be taken for a COPC file. They are dropped from the output's template; others stay. An
+    output named *.copc.laz gets a warning: it is plain LAZ."""
     from tiledsimplify.pipeline import run
     src = laspy.read(lidar_file(AUTZEN))
     las = laspy.convert(src, point_format_id=7, file_version="1.4")
@@ -213,7 +214,11 @@ def test_a_copc_inputs_octree_records_are_not_copied(tmp_path):
     assert [(v.user_id, v.record_id) for v in header.vlrs if v.user_id in ("copc", "ours")] == \
         [("ours", 7)]
     assert [(v.user_id, v.record_id) for v in header.evlrs] == [("ours", 8)]
-    run(tmp_path / "in.laz", tmp_path / "out.laz", ratio=0.5)
+    with caplog.at_level("WARNING", logger="tiledsimplify"):
+        run(tmp_path / "in.laz", tmp_path / "out.laz", ratio=0.5)
+        assert "COPC" not in caplog.text
+        run(tmp_path / "in.laz", tmp_path / "out.copc.laz", ratio=0.5)
+    assert "out.copc.laz: written as a plain LAZ file, not as COPC" in caplog.text
     with laspy.open(tmp_path / "out.laz") as r:
         assert "copc" not in {v.user_id for v in r.header.vlrs}
         assert [(v.user_id, v.record_id) for v in r.header.evlrs] == [("ours", 8)]

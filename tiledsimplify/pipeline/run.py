@@ -823,7 +823,12 @@ STORE_BYTES = 20
 
 def _warn_read_back(input, output, source):
     """Warn when the output goes where the input names its files (a folder or pattern of
-    LAS/LAZ tiles): a later run on the same input would read it as one more tile."""
+    LAS/LAZ tiles): a later run on the same input would read it as one more tile; and when
+    it is named as a COPC file, which it is not."""
+    if output.name.lower().endswith(".copc.laz"):
+        log.warning("%s: written as a plain LAZ file, not as COPC (no octree); name it "
+                    "*.laz, or make COPC from it with `pdal translate %s out.copc.laz`.",
+                    output, output.name)
     if source.is_las:
         from ..io.las import lists_path
         if lists_path(input, output) and not any(
