@@ -75,9 +75,10 @@ def _rss_mb():
 
 
 def _watch_memory(t0, every=60.0):
+    from tiledsimplify.pipeline.run import _peak_rss_mb  # VmHWM: not the parent's size
     while True:
         time.sleep(every)
-        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        peak = _peak_rss_mb()
         print(f"[{time.perf_counter() - t0:7.0f} s] RSS {_rss_mb():.0f} MB, peak {peak:.0f} MB",
               file=sys.stderr, flush=True)
 
@@ -96,7 +97,7 @@ def one(path, workers, tile_points, floor):
     return {"n": s.n_input, "workers": workers, "wall": wall, "tiles": s.n_tiles,
             "deeper": s.n_deeper, "seconds": s.seconds, "reached": s.reached,
             "kept": s.n_output, "cpu": ru.ru_utime + ru.ru_stime, "cpu_seconds": s.cpu_seconds,
-            "rss_mb": ru.ru_maxrss / 1024}
+            "rss_mb": s.peak_rss_mb}  # VmHWM: ru_maxrss held the parent's size (make_laz)
 
 
 def main(sizes, workers=(1, 2), tile_points=None, floor=0.5):

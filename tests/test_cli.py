@@ -1,5 +1,7 @@
 """The command line and the point writer: formats round-trip, exit codes, no half files."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -222,6 +224,24 @@ def test_run_writes_a_json_summary_for_pipelines(cloud, tmp_path):
     missing = tmp_path / "no_such_dir" / "run.json"
     assert main(["run", str(path), str(out), "--ratio", "0.25", "--summary", str(missing),
                  "-q"]) == EXIT_INPUT
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs Linux /proc")
+def test_the_summarys_peak_memory_is_the_runs_not_its_parents(cloud, tmp_path):
+    """A run started (fork and exec) by a process holding 600 MB reports its own peak, not
+    the parent's: Linux folds the parent's size into ``ru_maxrss`` at exec, which the summary
+    reported before (1,318 MB for a run whose own peak was 785 MB)."""
+    import json
+    import subprocess
+    import sys
+    _, path = cloud
+    held = np.ones(75_000_000)  # 600 MB, touched: resident in this process at the fork
+    summary = tmp_path / "run.json"
+    subprocess.run([sys.executable, "-m", "tiledsimplify", "run", str(path),
+                    str(tmp_path / "o.npy"), "--ratio", "0.25", "--summary", str(summary), "-q",
+                    "--no-progress"], check=True)
+    del held
+    assert 50 < json.loads(summary.read_text())["peak_rss_mb"] < 450
 
 
 def test_a_failed_run_still_writes_its_summary(tmp_path):
