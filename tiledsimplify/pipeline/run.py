@@ -107,7 +107,7 @@ def _peak_rss_mb():
     Not ``ru_maxrss`` on Linux: the kernel folds the old address space's peak into it at
     ``exec``, so a run started by fork and exec from a larger process (a Python orchestrator,
     a benchmark that made its input first) reported its parent's size: 1,318 MB for a 10M-point
-    run whose own peak was 785 MB (2026-12-03).
+    run where the same run started from a shell peaked at 785 MB (2026-12-03).
     """
     try:
         with open("/proc/self/status") as fh:
