@@ -193,6 +193,17 @@ def test_laz_of_variable_chunks_is_read_from_its_start(tmp_path, monkeypatch):
                                                  (CHUNK, 2 * CHUNK)]
     xyz = np.concatenate([c[1] for c in parts[0]()])
     np.testing.assert_allclose(xyz, expected, rtol=0, atol=1e-9)
+    # a run that ingests in parts (4 threads, parts of 20,000 points) writes what a run
+    # reading it in one process writes, as for a file of fixed chunks
+    import importlib
+    run_module = importlib.import_module("tiledsimplify.pipeline.run")
+    kw = dict(ratio=0.3, tile_points=30000, chunk_points=20_000)
+    run_module.run(tmp_path / "var.laz", tmp_path / "one.laz", scheduler="synchronous", **kw)
+    monkeypatch.setattr(run_module, "INGEST_PART_POINTS", 20_000)
+    monkeypatch.setattr(run_module, "INGEST_PARTS_FROM", 2)
+    run_module.run(tmp_path / "var.laz", tmp_path / "parts.laz", scheduler="threads",
+                   workers=4, **kw)
+    assert (tmp_path / "parts.laz").read_bytes() == (tmp_path / "one.laz").read_bytes()
 
 
 def test_a_copc_inputs_octree_records_are_not_copied(tmp_path, caplog):
