@@ -197,7 +197,7 @@ def test_laz_of_variable_chunks_is_read_from_its_start(tmp_path, monkeypatch):
     # reading it in one process writes, as for a file of fixed chunks
     import importlib
     run_module = importlib.import_module("tiledsimplify.pipeline.run")
-    kw = dict(ratio=0.3, tile_points=30000, chunk_points=20_000)
+    kw = {"ratio": 0.3, "tile_points": 30000, "chunk_points": 20_000}
     run_module.run(tmp_path / "var.laz", tmp_path / "one.laz", scheduler="synchronous", **kw)
     monkeypatch.setattr(run_module, "INGEST_PART_POINTS", 20_000)
     monkeypatch.setattr(run_module, "INGEST_PARTS_FROM", 2)
