@@ -271,6 +271,25 @@ def test_mixed_point_formats_read_but_do_not_write(tmp_path):
         src.template_header()
 
 
+def test_files_that_count_gps_time_differently_do_not_write(tmp_path):
+    """Two files of one layout, one in GPS week time and one in adjusted standard time: one
+    output has one encoding, so their times would mix; refused, as differing formats are."""
+    from laspy.header import GpsTimeType
+    small_las(tmp_path / "a.las", AUTZEN, slice(0, 300))
+    las = laspy.read(tmp_path / "a.las")
+    las.header.global_encoding.gps_time_type = GpsTimeType.STANDARD
+    las.write(tmp_path / "b.las")
+    src = LasSource(tmp_path)
+    assert src.count == 600 and "gps_time" in src.attribute_names  # reading is fine
+    with pytest.raises(FileFormatError, match=r"b\.las \(adjusted standard GPS time\) and .*"
+                                              r"a\.las \(week GPS time\) count gps_time "
+                                              r"differently"):
+        src.template_header()
+    las.header.global_encoding.gps_time_type = GpsTimeType.WEEK_TIME
+    las.write(tmp_path / "b.las")
+    LasSource(tmp_path).template_header()  # the same encoding: writable
+
+
 @pytest.mark.parametrize("case", ["formats", "dimension"])
 def test_run_refuses_an_output_layout_before_the_work(tmp_path, case):
     """What the LAS writer would refuse at the end of a run — files of two point formats, or

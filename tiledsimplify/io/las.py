@@ -355,6 +355,12 @@ COPC_USER_ID = "copc"
 VARIABLE_CHUNKS = 0xFFFFFFFF
 
 
+def _gps_time_type(info) -> str:
+    """How a file counts ``gps_time`` (its header's global encoding bit 0)."""
+    standard = int(info.header.global_encoding.gps_time_type) == 1
+    return "adjusted standard" if standard else "week"
+
+
 def variable_chunks(header: laspy.LasHeader) -> bool:
     """Whether a LAZ file's chunks vary in size: its LASzip VLR (user ``laszip encoded``,
     record 22204) gives the chunk size :data:`VARIABLE_CHUNKS` (bytes 12-15 of the record:
@@ -618,7 +624,8 @@ class LasSource:
         ------
         FileFormatError
             The files differ in point format id or in their dimensions (names/types, extra
-            bytes included), so no single output layout keeps all of them.
+            bytes included), so no single output layout keeps all of them; or they count
+            ``gps_time`` differently (GPS week time or adjusted standard time).
         """
         ref = self._first
         for info in self.infos[1:]:
@@ -631,6 +638,14 @@ class LasSource:
                     "format and dimensions. Merge or convert them to one layout first, e.g. "
                     "`pdal merge a.laz b.laz merged.laz` or `pdal translate in.laz out.laz "
                     "--writers.las.dataformat_id=<id> --writers.las.extra_dims=all`.")
+            if "gps_time" in info.dimension_names and _gps_time_type(info) != _gps_time_type(ref):
+                raise FileFormatError(
+                    f"{info.path} ({_gps_time_type(info)} GPS time) and {ref.path} "
+                    f"({_gps_time_type(ref)} GPS time) count gps_time differently, and one "
+                    "LAS/LAZ output has one way: their times would be mixed. Convert one to "
+                    "the other's first, e.g. `pdal translate in.laz out.laz "
+                    "--writers.las.global_encoding=1` (adjusted standard) or "
+                    "`--writers.las.global_encoding=0` (GPS week time).")
         header = copy.deepcopy(ref.header)
         # a COPC input's octree description (the "copc" info VLR and hierarchy EVLR) does
         # not describe the output: kept, readers would take it for a COPC file
