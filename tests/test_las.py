@@ -262,7 +262,9 @@ def test_folder_and_glob_read_as_one_cloud(tmp_path):
 def test_mixed_point_formats_read_but_do_not_write(tmp_path):
     small_las(tmp_path / "a.las", AUTZEN, slice(0, 300))      # PF 3 (with RGB)
     small_las(tmp_path / "b.las", LONE_STAR, slice(0, 200))   # PF 1
-    with pytest.warns(UserWarning, match="different CRS"):
+    with pytest.warns(UserWarning, match=r"different CRS .*\(not reprojected; a LAS/LAZ output "
+                                         r"takes the first file's CRS\): a\.las: .*; b\.las: "
+                                         r"EPSG:4326\. Reproject"):
         src = LasSource(tmp_path)
     assert "red" not in src.attribute_names and "gps_time" in src.attribute_names
     xyz, attrs = src.read_all()

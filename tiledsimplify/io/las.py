@@ -525,8 +525,13 @@ class LasSource:
         self.infos = [_read_info(p) for p in self.files]
         crs = {i.crs for i in self.infos if i.crs is not None}
         if len(crs) > 1:
-            warnings.warn("LAS/LAZ files with different CRS descriptions are read as one cloud: "
-                          + "; ".join(f"{i.path.name}: {_short(i.crs)}" for i in self.infos),
+            warnings.warn("LAS/LAZ files with different CRS descriptions are read as one cloud, "
+                          "their coordinates as they are (not reprojected; a LAS/LAZ output "
+                          "takes the first file's CRS): "
+                          + "; ".join(f"{i.path.name}: {_short(i.crs)}" for i in self.infos)
+                          + ". Reproject them to one CRS first if they differ in more than "
+                          "how it is written (e.g. `pdal translate in.laz out.laz reprojection "
+                          "--filters.reprojection.out_srs=EPSG:XXXX`).",
                           UserWarning, stacklevel=2)
         first = self.infos[0]
         common = []
