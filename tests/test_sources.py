@@ -126,3 +126,38 @@ def test_non_finite_points_fail_naming_the_file_and_the_point(tmp_path, cloud, s
         next(chunks)
     with pytest.raises(InputError, match=r"point 257 .*\(2 in points 0-999\)"):
         list(open_source(path, chunk_points=1000).chunks())
+
+
+def test_coordinates_that_look_like_degrees_are_named():
+    """x, y within +-180, +-90 and spanning under a hundredth of the heights' span look like
+    longitude and latitude (an airborne tile of 0.003 deg with 60 m of heights); a CAD part in
+    metres, a survey in UTM metres, a building in local metres do not."""
+    from tiledsimplify.io.sources import degrees_message
+    got = degrees_message("t.laz", [-123.070, 44.050, 120.0], [-123.067, 44.0515, 180.0])
+    assert got.startswith("t.laz: x and y look like degrees of longitude and latitude (x "
+                          "-123.07 .. -123.067, y 44.05 .. 44.0515; z spans 20,000 times more)")
+    assert "Reproject to a projected CRS first" in got
+    for lo, hi in [([0, 0, 0], [1, 1, 0.3]),                          # a CAD part
+                   ([515368, 4918340, 2322], [515401, 4918381, 2338]),  # UTM
+                   ([0, 0, 0], [40, 60, 25]),                         # a building
+                   ([-123.07, 44.05, 120.0], [-123.07, 44.05, 180.0]),  # no horizontal span
+                   ([10.0, 50.0, 0.0], [10.5, 50.5, 40.0])]:           # heights span less
+        assert degrees_message("t", lo, hi) is None, (lo, hi)
+    assert degrees_message("t", [0, 0, np.nan], [1, 1, 1]) is None
+
+
+def test_a_run_on_degrees_warns(tmp_path, caplog):
+    from tiledsimplify.pipeline import run
+    rng = np.random.default_rng(0)
+    X = np.c_[-123.07 + 0.003 * rng.random(3000), 44.05 + 0.002 * rng.random(3000),
+              100.0 + 60.0 * rng.random(3000)]
+    np.save(tmp_path / "deg.npy", X)
+    with caplog.at_level("WARNING", logger="tiledsimplify"):
+        run(tmp_path / "deg.npy", tmp_path / "o.npy", ratio=0.5)
+    assert "deg.npy: x and y look like degrees" in caplog.text
+    caplog.clear()
+    X[:, :2] = (X[:, :2] - X[:, :2].min(axis=0)) * 111_000  # the same, in metres
+    np.save(tmp_path / "m.npy", X)
+    with caplog.at_level("WARNING", logger="tiledsimplify"):
+        run(tmp_path / "m.npy", tmp_path / "o.npy", ratio=0.5)
+    assert "degrees" not in caplog.text

@@ -30,7 +30,7 @@ from .io.points_out import (
     write_json,
     write_points,
 )
-from .io.sources import check_finite
+from .io.sources import check_finite, degrees_message
 
 log = logging.getLogger("tiledsimplify")
 
@@ -305,6 +305,9 @@ def _simplify(args):
     if len(xyz) == 0:
         raise TiledSimplifyError(f"{args.input}: the input has no points; nothing to simplify. "
                                  "Check that it is the file you meant.")
+    degrees = degrees_message(args.input, xyz.min(axis=0), xyz.max(axis=0))
+    if degrees:
+        log.warning("%s", degrees)
     options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
                               detect_boundary=not args.no_boundary)
     if (os.cpu_count() or 1) > 1:  # a cold cache: all cores compile (at once if warm)

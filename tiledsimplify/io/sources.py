@@ -33,6 +33,33 @@ def check_finite(xyz, start, files):
     return xyz
 
 
+#: height span over horizontal span above which x, y within ±180, ±90 look like degrees
+DEGREES_RATIO = 100.0
+
+
+def degrees_message(name, lo, hi):
+    """A warning's text if ``x`` and ``y`` of the bounds ``lo``, ``hi`` look like degrees of
+    longitude and latitude — within ±180 and ±90, and spanning less than a hundredth of the
+    height's span (an airborne tile of 0.01° is ~1 km across, its heights tens of metres) —
+    else None. Distances in such coordinates mix degrees and metres: the Voronoi neighbours,
+    normals and edges would be computed in a space stretched ~100,000 times in height."""
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    if lo.size != 3 or not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        return None
+    flat = float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    tall = float(hi[2] - lo[2])
+    if not (-180 <= lo[0] and hi[0] <= 180 and -90 <= lo[1] and hi[1] <= 90):
+        return None
+    if not (flat > 0 and tall > DEGREES_RATIO * flat):
+        return None
+    return (f"{name}: x and y look like degrees of longitude and latitude (x {lo[0]:.6g} .. "
+            f"{hi[0]:.6g}, y {lo[1]:.6g} .. {hi[1]:.6g}; z spans {tall / flat:,.0f} times "
+            "more): distances would mix degrees and metres, and the simplification would "
+            "follow the heights alone. Reproject to a projected CRS first (e.g. `pdal "
+            "translate in.laz out.laz reprojection --filters.reprojection.out_srs=EPSG:XXXX`, "
+            "a UTM zone).")
+
+
 class ArraySource:
     """Chunks over an in-memory or memory-mapped (n, 3) array (same interface as LasSource).
 

@@ -42,7 +42,7 @@ from ..io.points_out import (
     check_space,
     record_bytes,
 )
-from ..io.sources import open_source
+from ..io.sources import degrees_message, open_source
 from ..tiles import IncompleteStoreError, TileStore
 from .budget import kept_in_tile, merge_passes, plan_cut, store_pass, store_sequences
 from .input_order import InputRanks
@@ -678,6 +678,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                      "" if parts is None else f", {len(parts)} parts read at once")
         stage("ingest")
         _check_grid(output, source, ts)
+        degrees = degrees_message(input, *ts.root_attrs["bounds"])
+        if degrees:
+            log.warning("%s", degrees)
         if warming is not None:  # the kernels' first compile, started before the ingest
             warming.join()
             stage("compile")
