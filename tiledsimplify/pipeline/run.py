@@ -763,9 +763,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     seconds["total"] = time.perf_counter() - t_start
     cpu_seconds["total"] = sum(cpu_seconds.values())
     reached = n - n_removed == target
-    message = "" if reached else (
-        f"asked to keep {target} of {n} points, but boundary points alone number more: kept "
-        f"{n_out}. Raise the target or options.boundary_threshold.")
+    message = "" if reached else _short_message(target, n, n_out, n_boundary, options)
     if message:
         log.warning("%s", message)
     summary = RunSummary(n_input=n, n_output=n_out, target=target, n_boundary=n_boundary,
@@ -780,6 +778,16 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
              seconds["total"], n / seconds["total"] if seconds["total"] else 0.0,
              ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items() if k != "total"))
     return summary
+
+
+def _short_message(target, n, n_out, n_boundary, options):
+    """Why a run kept more than its target: every tile ran to its end, so what is left is
+    boundary points and points a guard vetoed (``options.guard``), as the core says it."""
+    n_g = n_out - n_boundary
+    return (f"asked to keep {target} of {n} points, but {n_out} must be kept ({n_boundary} "
+            "boundary" + (f"; {n_g} vetoed by the {options.guard} guard" if n_g else "")
+            + f"): kept {n_out}. Raise the target, or raise options.boundary_threshold to flag "
+            "fewer boundary points" + (", or raise options.max_spacing" if n_g else "") + ".")
 
 
 def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
