@@ -71,12 +71,15 @@ def test_report_files_images_and_metrics(block):
     assert sorted(p.name for p in out.iterdir()) == sorted(names)
 
     side = int(round(PANEL_INCHES * DPI))
+    title = round(0.4 * DPI)
     images = {n: mpimg.imread(out / f"{n}.png") for n in
               ("original", "boundary", "simplified", "overview")}
-    for name in ("original", "boundary", "simplified"):
-        assert images[name].shape[:2] == (side, side), name
-    assert images["overview"].shape[:2] == (int(round(PANEL_INCHES * 0.8 * DPI)),
-                                            int(round(PANEL_INCHES * 3 * 0.75 * DPI)))
+    h, w = images["original"].shape[:2]  # the panel takes the view's shape, longer side fixed
+    assert max(w, h - title) == side and min(w, h - title) >= side / 3 - 1
+    for name in ("boundary", "simplified"):
+        assert images[name].shape[:2] == (h, w), name
+    oh, ow = images["overview"].shape[:2]  # three panels of 0.75 the size, one title line
+    assert abs(ow - 3 * 0.75 * w) <= 3 and abs((oh - title) - 0.75 * (h - title)) <= 2
     for name, img in images.items():
         assert 0.01 < _ink(img) < 0.8, name  # something is drawn, and not a solid block
     # the boundary points are drawn in red on the boundary panel only
@@ -100,6 +103,22 @@ def test_report_files_images_and_metrics(block):
     assert json.loads((out / "metrics.json").read_text()) == pytest.approx(want, rel=1e-12)
     assert {"edge_coverage", "boundary_f1", "adaptivity"} <= set(got)
     assert f"{int(flagged.sum()):,} (" in (out / "report.md").read_text()
+
+
+def test_a_wide_cloud_gets_a_wide_panel(tmp_path):
+    """An airborne-like strip (300 x 100 x 10) fills a wide panel instead of a third of a
+    square one: the panel's shape follows the view, within 3:1; a tower gets a high one."""
+    from tiledsimplify.report import draw_figures
+    X = np.random.default_rng(0).random((20000, 3)) * [300.0, 100.0, 10.0]
+    img = mpimg.imread(draw_figures(tmp_path, X, X[::5], None, None)["original"])
+    h, w = img.shape[:2]
+    assert w == round(PANEL_INCHES * DPI) and h - round(0.4 * DPI) < 0.6 * w
+    assert _ink(img) > 0.15  # 0.27; 0.10 in the square panel used before
+    (tmp_path / "tower").mkdir()
+    tower = X[:, [2, 1, 0]] * [1.0, 0.1, 10.0]  # 10 x 10 x 3,000
+    img = mpimg.imread(draw_figures(tmp_path / "tower", tower, tower[::5], None, None)[
+        "original"])
+    assert img.shape[0] > img.shape[1]
 
 
 def test_all_points_output_and_foreign_result(block, tmp_path):

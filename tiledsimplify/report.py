@@ -208,13 +208,25 @@ def _draw(ax, xyz, R, centre, half, highlight=None, base="grey", dpi=DPI):
     ax.set_axis_off()
 
 
+#: a panel is at most this many times wider than high, or higher than wide
+MAX_PANEL_STRETCH = 3.0
+
+
 def _frame(original, R):
-    """Centre and half-extents (screen units) that fit the whole input, with a margin."""
+    """Centre and half-extents (screen units) that fit the whole input, with a margin: as
+    wide and high as the view of the input, within :data:`MAX_PANEL_STRETCH` of square (an
+    airborne tile seen from the side is a wide strip; in a square frame it filled a third)."""
     centre = 0.5 * (original.min(0) + original.max(0))
     q = (original - centre) @ R.T
-    half = np.abs(q[:, :2]).max(0) * 1.04
-    h = max(half.max(), 1e-300)
-    return centre, np.array([h, h])
+    half = np.maximum(np.abs(q[:, :2]).max(0) * 1.04, 1e-300)
+    return centre, np.maximum(half, half.max() / MAX_PANEL_STRETCH)
+
+
+def _panel_inches(half, longest):
+    """(width, height) of a panel whose longer side is ``longest`` inches, shaped as the
+    frame's half-extents ``half``."""
+    aspect = float(half[1] / half[0])
+    return (longest, longest * aspect) if aspect <= 1.0 else (longest / aspect, longest)
 
 
 def _subsample(n, limit, seed=0):
@@ -248,17 +260,20 @@ def draw_figures(directory, original, kept_xyz, boundary, kept_boundary, *, up="
     for name, paint in panels.items():
         if name == "boundary" and boundary is None:
             continue
-        fig = plt.figure(figsize=(PANEL_INCHES, PANEL_INCHES), dpi=dpi)
-        ax = fig.add_axes((0.0, 0.0, 1.0, 0.93))
+        width, height = _panel_inches(half, PANEL_INCHES)
+        fig = plt.figure(figsize=(width, height + 0.4), dpi=dpi)  # and a title line
+        ax = fig.add_axes((0.0, 0.0, 1.0, height / (height + 0.4)))
         paint(ax)
-        fig.suptitle(titles.get(name, name), y=0.975, fontsize=11)
+        fig.suptitle(titles.get(name, name), y=1.0 - 0.05 / (height + 0.4), va="top",
+                     fontsize=11)
         files[name] = directory / f"{name}.png"
         fig.savefig(files[name], dpi=dpi)
         plt.close(fig)
     names = [n for n in ("original", "boundary", "simplified") if n in files]
-    fig = plt.figure(figsize=(PANEL_INCHES * len(names) * 0.75, PANEL_INCHES * 0.8), dpi=dpi)
+    width, height = _panel_inches(half, PANEL_INCHES * 0.75)
+    fig = plt.figure(figsize=(width * len(names), height + 0.4), dpi=dpi)
     for i, name in enumerate(names):
-        ax = fig.add_axes((i / len(names), 0.0, 1.0 / len(names), 0.9))
+        ax = fig.add_axes((i / len(names), 0.0, 1.0 / len(names), height / (height + 0.4)))
         panels[name](ax)
         ax.set_title(f"({'abc'[i]}) {titles.get(name, name)}", fontsize=10, y=1.0)
     files["overview"] = directory / "overview.png"
