@@ -318,3 +318,14 @@ def test_a_stop_signal_is_taken_once():
     finally:
         for s, h in before.items():
             signal.signal(s, h)
+
+
+@pytest.mark.parametrize("halo", ["-1", "nan", "inf"])
+def test_a_bad_halo_is_named_with_its_default(cloud, tmp_path, caplog, halo):
+    _, path = cloud
+    with caplog.at_level("ERROR", logger="tiledsimplify"):
+        assert main(["run", str(path), str(tmp_path / "o.npy"), "--ratio", "0.5", "--halo", halo,
+                     "-q", "--no-progress"]) == EXIT_INPUT
+    assert "halo must be a finite distance >= 0 in the input's units, got" in caplog.text
+    assert "leave it out for the default (10 x the estimated spacing)" in caplog.text
+    assert not (tmp_path / "o.npy").exists()

@@ -688,7 +688,9 @@ class TileStore:
         if halo is not None:
             halo = float(halo)
             if not (np.isfinite(halo) and halo >= 0):
-                raise InputError(f"halo must be a finite distance >= 0, got {halo}")
+                raise InputError(f"halo must be a finite distance >= 0 in the input's units, "
+                                 f"got {halo}; leave it out for the default "
+                                 f"({HALO_SPACINGS:g} x the estimated spacing).")
         if chunk_rows is None:
             chunk_rows = int(min(DEFAULT_CHUNK_ROWS, max(4096, 1 << (tile_points - 1)
                                                           .bit_length())))
