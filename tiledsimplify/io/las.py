@@ -647,10 +647,10 @@ class LasSource:
                 raise FileFormatError(
                     f"{info.path} ({_gps_time_type(info)} GPS time) and {ref.path} "
                     f"({_gps_time_type(ref)} GPS time) count gps_time differently, and one "
-                    "LAS/LAZ output has one way: their times would be mixed. Convert one to "
-                    "the other's first, e.g. `pdal translate in.laz out.laz "
-                    "--writers.las.global_encoding=1` (adjusted standard) or "
-                    "`--writers.las.global_encoding=0` (GPS week time).")
+                    "LAS/LAZ output has one way: their times would be mixed. Simplify them in "
+                    "separate runs (week time cannot be converted without its GPS week), or "
+                    "write a PLY/NPY/text output, which has no gps_time; if a header's flag is "
+                    "simply wrong, fix that file's global encoding first.")
         header = copy.deepcopy(ref.header)
         # a COPC input's octree description (the "copc" info VLR and hierarchy EVLR) does
         # not describe the output: kept, readers would take it for a COPC file
