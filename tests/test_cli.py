@@ -148,7 +148,7 @@ def test_bad_output_fails_before_the_work(cloud, tmp_path, caplog, monkeypatch):
     def no_work(*a, **k):
         raise AssertionError("the work started before the output was checked")
 
-    monkeypatch.setattr(cli, "read_points", no_work)
+    monkeypatch.setattr(cli, "read_xyz", no_work)
     monkeypatch.setattr(run_mod.TileStore, "create", no_work)
     missing = tmp_path / "no_such_dir" / "out.ply"
     for command in ("simplify", "run"):
@@ -329,3 +329,37 @@ def test_a_bad_halo_is_named_with_its_default(cloud, tmp_path, caplog, halo):
     assert "halo must be a finite distance >= 0 in the input's units, got" in caplog.text
     assert "leave it out for the default (10 x the estimated spacing)" in caplog.text
     assert not (tmp_path / "o.npy").exists()
+
+
+def test_evaluate_and_simplify_read_las_as_run_does(data_dir, tmp_path, capsys):
+    """``evaluate`` and ``simplify`` read LAS/LAZ as ``run`` does (they refused it: "unsupported
+    point file type '.laz'", though evaluate's help said any input format): the same numbers
+    and the same kept points as from the same coordinates in NPY."""
+    import json
+
+    import laspy
+    src = data_dir / "lidar" / "autzen_trim.laz"
+    las = laspy.read(src)
+    X = np.c_[las.x, las.y, las.z][:20000]
+    small = tmp_path / "small.laz"
+    out = laspy.LasData(las.header)
+    out.points = las.points[:20000]
+    out.write(small)
+    np.save(tmp_path / "small.npy", X)
+    assert main(["simplify", str(small), str(tmp_path / "a.npy"), "--ratio", "0.3", "-q"]) \
+        == EXIT_OK
+    assert main(["simplify", str(tmp_path / "small.npy"), str(tmp_path / "b.npy"), "--ratio",
+                 "0.3", "-q"]) == EXIT_OK
+    a, b = np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy")
+    assert len(a) == 6000 and a.tobytes() == b.tobytes()  # NaN importance: compare bytes
+    assert main(["run", str(small), str(tmp_path / "r.laz"), "--ratio", "0.3", "-q",
+                 "--no-progress"]) == EXIT_OK
+    kept = laspy.read(tmp_path / "r.laz")
+    np.save(tmp_path / "r.npy", np.c_[kept.x, kept.y, kept.z])
+    capsys.readouterr()
+    got = []
+    for original, result in [(small, tmp_path / "r.laz"),
+                             (tmp_path / "small.npy", tmp_path / "r.npy")]:
+        assert main(["evaluate", str(original), str(result), "--json"]) == EXIT_OK
+        got.append(json.loads(capsys.readouterr().out))
+    assert got[0] == got[1] and got[0]["n_kept"] == 6000 and got[0]["n_original"] == 20000

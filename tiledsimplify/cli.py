@@ -22,7 +22,6 @@ from . import __version__
 from .core import SimplifyOptions, compile_cache, simplify_points
 from .core.options import MODES
 from .errors import BudgetWarning, InputError, TiledSimplifyError
-from .io import read_points
 from .io.points_out import (
     check_not_input,
     check_output,
@@ -30,7 +29,7 @@ from .io.points_out import (
     write_json,
     write_points,
 )
-from .io.sources import check_finite, degrees_message
+from .io.sources import degrees_message, read_xyz
 
 log = logging.getLogger("tiledsimplify")
 
@@ -84,7 +83,8 @@ def _parser():
         description="Simplify one point cloud in memory, keeping and flagging sharp-edge "
                     "points. Output columns: sharp_edge, importance (at removal; NaN for kept "
                     "points), simplify_rank (removal order; -1 for kept), nx, ny, nz.")
-    s.add_argument("input", help="PLY, OBJ/OFF/STL (vertices), XYZ/CSV/TXT or NPY; .gz allowed")
+    s.add_argument("input", help="LAS/LAZ (file, folder or glob), PLY, OBJ/OFF/STL (vertices), "
+                                 "XYZ/CSV/TXT or NPY; .gz allowed")
     s.add_argument("output", help="output .ply, .npy, .xyz or .csv")
     g = s.add_mutually_exclusive_group(required=True)
     g.add_argument("--ratio", type=float, help="fraction of points to keep, in (0, 1]")
@@ -144,8 +144,9 @@ def _parser():
         description="Surface error (after Pauly et al. 2002), Chamfer and Hausdorff distance "
                     "(divided by the original's bounding-box diagonal), and with --mesh the "
                     "coverage of the mesh's sharp edges (dihedral > 30 degrees).")
-    e.add_argument("original", help="the original points (any input format)")
-    e.add_argument("simplified", help="the simplified points (any input format)")
+    e.add_argument("original", help="the original points (any input format of run, LAS/LAZ "
+                                     "included)")
+    e.add_argument("simplified", help="the simplified points (any input format of run)")
     e.add_argument("--mesh", help="a CAD mesh of the part: also measure sharp-edge coverage")
     e.add_argument("--spacing", type=float, default=None,
                    help="original point spacing (default: median nearest-neighbour distance)")
@@ -158,7 +159,7 @@ def _parser():
                     "flags) and the simplified cloud, like the paper's Figs. 2-3, and write "
                     "report.md with the quality measures of 'tiledsimplify evaluate'. Needs "
                     "matplotlib: pip install 'tiledsimplify[report]'.")
-    rp.add_argument("input", help="the original points (any input format)")
+    rp.add_argument("input", help="the original points (any input format of run)")
     rp.add_argument("result", help="the simplified points, ideally a tiledsimplify output "
                                    "(LAS/LAZ, PLY, NPY, XYZ/CSV with columns)")
     rp.add_argument("-o", "--output", required=True, help="directory for the PNGs and "
@@ -217,8 +218,8 @@ def _evaluate(args):
 
     from . import metrics, synthetic
     from .io import read_mesh
-    original = check_finite(read_points(args.original), 0, [args.original])
-    kept = check_finite(read_points(args.simplified), 0, [args.simplified])
+    original = read_xyz(args.original)[0]
+    kept = read_xyz(args.simplified)[0]
     kw = {"spacing": args.spacing}
     if args.mesh:
         V, F = read_mesh(args.mesh)
@@ -300,7 +301,7 @@ def _simplify(args):
     t0 = time.perf_counter()
     check_output(args.output)
     check_not_input(args.output, [args.input])
-    xyz = check_finite(read_points(args.input), 0, [args.input])
+    xyz = read_xyz(args.input)[0]
     log.info("read %d points from %s in %.2f s", len(xyz), args.input, time.perf_counter() - t0)
     if len(xyz) == 0:
         raise TiledSimplifyError(f"{args.input}: the input has no points; nothing to simplify. "

@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from .errors import TiledSimplifyError
 from .io.columns import read_columns
-from .io.sources import check_finite, open_source
+from .io.sources import check_finite, read_xyz
 
 PANEL_INCHES = 6.0
 DPI = 150
@@ -86,11 +86,10 @@ class Report:
 
 
 def _read_input(path):
-    src = open_source(path)
-    parts = [xyz for _, xyz, _ in src.chunks()]
-    if not parts:
+    xyz, src = read_xyz(path)
+    if not len(xyz):
         raise TiledSimplifyError(f"{path}: the input has no points; nothing to report.")
-    return np.concatenate(parts), src.is_las
+    return xyz, src.is_las
 
 
 def _match(original, kept_xyz):
