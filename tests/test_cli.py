@@ -363,3 +363,19 @@ def test_evaluate_and_simplify_read_las_as_run_does(data_dir, tmp_path, capsys):
         assert main(["evaluate", str(original), str(result), "--json"]) == EXIT_OK
         got.append(json.loads(capsys.readouterr().out))
     assert got[0] == got[1] and got[0]["n_kept"] == 6000 and got[0]["n_original"] == 20000
+
+
+def test_a_folder_without_las_files_says_what_it_holds(tmp_path, caplog):
+    """A folder is read as LAS/LAZ tiles; one of PLY files used to be reported as "file not
+    found", which it is not: the message now says what the folder holds and what to do."""
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("scan log")
+    for name in ("a.ply", "b.ply"):
+        write_points(folder / name, np.random.default_rng(0).random((50, 3)))
+    with caplog.at_level("ERROR", logger="tiledsimplify"):
+        assert main(["run", str(folder), str(tmp_path / "o.ply"), "--ratio", "0.5", "-q",
+                     "--no-progress"]) == EXIT_INPUT
+    assert f"no .las/.laz files in folder {folder} (it holds 3 other file(s), e.g. a.ply: a " \
+        "folder is read as LAS/LAZ tiles; give one file of another format" in caplog.text
+    assert "file not found" not in caplog.text

@@ -7,6 +7,7 @@ or SIGHUP (129), after the same clean-up as a failure (no partial output, no tem
 """
 
 import argparse
+import errno
 import logging
 import math
 import os
@@ -362,7 +363,9 @@ def main(argv=None):
                    "report": _report, "compile": _compile}[args.command]
         return command(args)
     except FileNotFoundError as exc:
-        message = f"{exc.filename or exc}: file not found. Check the path."
+        why = exc.strerror if exc.strerror and exc.strerror not in (
+            os.strerror(errno.ENOENT), "No such file") else "file not found"  # else ours: says more
+        message = f"{exc.filename or exc}: {why}. Check the path."
         code = EXIT_INPUT
     except (TiledSimplifyError, ValueError, ImportError) as exc:
         message, code = str(exc), EXIT_INPUT

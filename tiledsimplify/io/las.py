@@ -124,6 +124,11 @@ def _is_las(path: Path) -> bool:
     return path.suffix.lower() in LAS_SUFFIXES
 
 
+#: suffixes of point files that are not LAS/LAZ (named as examples when a folder holds no LAS)
+_POINT_SUFFIXES = (".ply", ".gz", ".xyz", ".csv", ".pts", ".asc", ".npy", ".e57", ".pcd",
+                   ".obj", ".stl", ".off")
+
+
 def _files_of_one(spec) -> list[Path]:
     path = Path(spec)
     if path.is_file():
@@ -134,10 +139,16 @@ def _files_of_one(spec) -> list[Path]:
                 "other formats first (e.g. `pdal translate in.e57 out.laz`).")
         return [path]
     if path.is_dir():
-        found = sorted(p for p in path.iterdir() if p.is_file() and _is_las(p))
+        files = sorted(p for p in path.iterdir() if p.is_file())
+        found = [p for p in files if _is_las(p)]
         if not found:
+            points = [p for p in files if p.suffix.lower() in _POINT_SUFFIXES] or files
+            other = (f" (it holds {len(files)} other file(s), e.g. {points[0].name}: a folder is "
+                     "read as LAS/LAZ tiles; give one file of another format, or convert and "
+                     "merge them first, e.g. `pdal merge a.ply b.ply merged.laz`)" if files
+                     else "")
             raise FileNotFoundError(errno.ENOENT,
-                                    f"no .las/.laz files in folder {path}", str(path))
+                                    f"no .las/.laz files in folder {path}{other}", str(path))
         return found
     text = os.fspath(spec)
     if _GLOB_CHARS.search(text):
