@@ -76,6 +76,20 @@ class SimplifyResult:
         return keep
 
 
+def short_message(target, n, must, kept, boundary, vetoed, guard, frozen=None):
+    """Why ``kept`` points of ``n`` stay, not ``target``: ``must`` had to — ``boundary``
+    boundary points, ``frozen`` frozen ones (if given) and ``vetoed`` that the ``guard`` rule
+    vetoed. The text of :attr:`SimplifyResult.message` and of a tiled run's summary."""
+    why = f"{boundary} boundary"
+    if frozen is not None:
+        why += f", {frozen} frozen, overlapping ones counted once"
+    if vetoed:
+        why += f"; {vetoed} vetoed by the {guard} guard"
+    return (f"asked to keep {target} of {n} points, but {must} must be kept ({why}): kept "
+            f"{kept}. Raise the target, or raise options.boundary_threshold to flag fewer "
+            "boundary points" + (", or raise options.max_spacing" if vetoed else "") + ".")
+
+
 def resolve_target(n, ratio, count):
     """The target count from exactly one of ``ratio`` (0..1] or ``count`` (0..n)."""
     if (ratio is None) == (count is None):

@@ -25,7 +25,7 @@ from .normals import all_normals
 from .options import SimplifyOptions
 from .refine import protected, refine_coverage
 from .removal import GUARDS, remove_points
-from .result import SimplifyResult, resolve_target
+from .result import SimplifyResult, resolve_target, short_message
 from .voronoi import BOX_FACTOR, TOL_FACTOR, scale_of, voronoi_neighbours
 from .zorder import distinct
 
@@ -419,12 +419,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         n_b = int(boundary.sum())
         n_f = int(frozen.sum())
         n_g = n - order.size - int((boundary | frozen).sum())
-        message = (f"asked to keep {target} of {n} points, but {n - order.size} must be kept "
-                   f"({n_b} boundary, {n_f} frozen, overlapping ones counted once"
-                   + (f"; {n_g} vetoed by the {options.guard} guard" if n_g else "")
-                   + f"): kept {n - cut}. Raise the target, or raise "
-                   "options.boundary_threshold to flag fewer boundary points"
-                   + (", or raise options.max_spacing" if n_g else "") + ".")
+        message = short_message(target, n, n - order.size, n - cut, n_b, n_g, options.guard,
+                                frozen=n_f)
         warnings.warn(message, BudgetWarning, stacklevel=2)
     stats["n_boundary"] = int(boundary.sum())
     stats["threshold"] = threshold

@@ -367,9 +367,8 @@ def open_source(spec, chunk_points=1_000_000):
 def read_xyz(spec):
     """Every point of any input :func:`open_source` reads (LAS/LAZ files, folders and globs
     too), at once: ``(xyz (n, 3) float64, source)``. For the commands that hold a cloud in
-    memory (``simplify``, ``evaluate``, ``report``); coordinates are checked finite as
-    they are read."""
+    memory (``simplify``, ``evaluate``, ``report``); the chunks are checked finite as they
+    are read (:func:`check_finite`; LAS/LAZ coordinates are integers)."""
     src = open_source(spec)
     parts = [xyz for _, xyz, _ in src.chunks()]
-    xyz = np.concatenate(parts) if parts else np.empty((0, 3))
-    return check_finite(xyz, 0, list(getattr(src, "files", [])) or [spec]), src
+    return (np.concatenate(parts) if parts else np.empty((0, 3))), src

@@ -31,7 +31,7 @@ from dask.callbacks import Callback
 
 from .. import __version__
 from ..core import SimplifyOptions, compile_cache, edge_fit
-from ..core.result import resolve_target
+from ..core.result import resolve_target, short_message
 from ..errors import InputError, TiledSimplifyError
 from ..io import points_out
 from ..io.las import LAS_SUFFIXES
@@ -763,7 +763,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     seconds["total"] = time.perf_counter() - t_start
     cpu_seconds["total"] = sum(cpu_seconds.values())
     reached = n - n_removed == target
-    message = "" if reached else _short_message(target, n, n_out, n_boundary, options)
+    # short: every tile ran to its end, so what is left is boundary points and vetoed ones
+    message = "" if reached else short_message(target, n, n_out, n_out, n_boundary,
+                                               n_out - n_boundary, options.guard)
     if message:
         log.warning("%s", message)
     summary = RunSummary(n_input=n, n_output=n_out, target=target, n_boundary=n_boundary,
@@ -778,16 +780,6 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
              seconds["total"], n / seconds["total"] if seconds["total"] else 0.0,
              ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items() if k != "total"))
     return summary
-
-
-def _short_message(target, n, n_out, n_boundary, options):
-    """Why a run kept more than its target: every tile ran to its end, so what is left is
-    boundary points and points a guard vetoed (``options.guard``), as the core says it."""
-    n_g = n_out - n_boundary
-    return (f"asked to keep {target} of {n} points, but {n_out} must be kept ({n_boundary} "
-            "boundary" + (f"; {n_g} vetoed by the {options.guard} guard" if n_g else "")
-            + f"): kept {n_out}. Raise the target, or raise options.boundary_threshold to flag "
-            "fewer boundary points" + (", or raise options.max_spacing" if n_g else "") + ".")
 
 
 def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
@@ -856,8 +848,7 @@ def _warn_read_back(input, output, source):
                     output, output.name)
     if source.is_las:
         from ..io.las import lists_path
-        if lists_path(input, output) and not any(
-                os.path.abspath(f) == os.path.abspath(output) for f in source.files):
+        if lists_path(input, output):  # (an input file itself: refused before)
             log.warning("%s: the output goes where the input %s names its files; a later run "
                         "on the same input will read it as one more input file. Write it to "
                         "another folder.", output, input)
@@ -879,10 +870,9 @@ def _check_grid(output, source, ts):
     may be wrong or zero)."""
     if output.suffix.lower() in LAS_SUFFIXES and source.is_las:
         from ..io.las_pieces import fits_grid, off_grid
-        header = source.template_header()
         lo, hi = ts.root_attrs["bounds"]
-        if not fits_grid(lo, hi, header.scales, header.offsets):
-            raise off_grid(output, lo, hi, header.scales, header.offsets)
+        if not fits_grid(lo, hi, source.scales, source.offsets):  # the template's
+            raise off_grid(output, lo, hi, source.scales, source.offsets)
 
 
 def _check_room(output, output_bytes, store, n):
@@ -969,11 +959,6 @@ def _piece_part(got, part):
         return getattr(piece, part)
     # a copy: the same object may be the head's or tail's task's input in this worker
     return dataclasses.replace(piece, head=b"", tail=None), boundary
-
-
-def _compress_span(layout, parts):
-    """A LASzip chunk that straddles pieces, from a tail and the following heads."""
-    return layout.compress(parts)
 
 
 #: tiles read ahead of the one being written, per worker (each a tile's kept records)
@@ -1079,9 +1064,9 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
 def _write_laz_chunks(ts, out, prefix, refined, is_las, client, counts, written):
     """A LAZ output on a cluster, compressed by its workers: each tile's kept points
     (``counts``) are packed and cut at the file's chunk boundaries there (:func:`_tile_piece`
-    with the file's point where they start), its whole chunks compressed; each chunk that straddles tiles is compressed
-    by a task from the tail of one and the heads of the next (:func:`_compress_span`). The
-    client writes the chunks in order and grows the header by each tile's summary: the file
+    with the file's point where they start), its whole chunks compressed; each chunk that
+    straddles tiles is compressed by a task from the tail of one and the heads of the next
+    (:meth:`.LasLayout.compress`). The client writes the chunks in order and grows the header by each tile's summary: the file
     laspy would write (:class:`.las_pieces.ChunkWriter`). ``READ_AHEAD`` tiles per worker
     thread are in flight. Returns ``(points, boundary points)``."""
     from ..io.las_pieces import straddles
@@ -1105,7 +1090,7 @@ def _write_laz_chunks(ts, out, prefix, refined, is_las, client, counts, written)
             parts = [client.submit(_piece_part, pieces[t], "tail", pure=False)]
             parts += [client.submit(_piece_part, pieces[u], "head", pure=False)
                       for u in span[t]]
-            spans[t] = client.submit(_compress_span, out.layout, parts, pure=False)
+            spans[t] = client.submit(out.layout.compress, parts, pure=False)
             made[1] += 1
 
     n_out = n_boundary = 0
