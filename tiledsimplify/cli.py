@@ -19,9 +19,10 @@ import warnings
 
 import numpy as np
 
-from . import __version__
+from . import __version__, machine
 from .core import SimplifyOptions, compile_cache, simplify_points
 from .core.options import MODES
+from .core.simplify import PEAK_BYTES_PER_POINT
 from .errors import BudgetWarning, InputError, TiledSimplifyError
 from .io.points_out import (
     check_not_input,
@@ -30,7 +31,7 @@ from .io.points_out import (
     write_json,
     write_points,
 )
-from .io.sources import degrees_message, read_xyz
+from .io.sources import degrees_message, open_source, read_all, read_xyz
 
 log = logging.getLogger("tiledsimplify")
 
@@ -120,7 +121,10 @@ def _parser():
                    help="threads (default), processes, synchronous, or tcp://HOST:PORT (a "
                         "dask.distributed scheduler: its workers must see --store at the same "
                         "path and run this tiledsimplify; checked before the ingest)")
-    r.add_argument("--workers", type=int, default=None, help="local workers")
+    r.add_argument("--workers", type=int, default=None,
+                   help="local workers (default: one per CPU this process may use, by its "
+                        "affinity and cgroup quota; fewer if their tiles would not fit in the "
+                        "memory left)")
     r.add_argument("--store", default=None,
                    help="zarr tile store directory (default: temporary, under TMPDIR); "
                         "reuse it to resume after a failure or a stop (Ctrl-C, SIGTERM)")
@@ -186,7 +190,7 @@ def _parser():
                     "$NUMBA_CACHE_DIR, else ~/.cache/tiledsimplify; a warm cache returns at "
                     "once. 'run' and 'simplify' also do this by themselves on a cold cache.")
     c.add_argument("--jobs", type=int, default=None,
-                   help="compile processes (default: one per core)")
+                   help="compile processes (default: one per CPU this process may use)")
     c.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
     return p
 
@@ -298,11 +302,28 @@ def _run(args):
     return code
 
 
+def check_memory(name, n, room=None):
+    """Refuse to simplify ``n`` points in memory where that would need more than the memory
+    left (:func:`.machine.available_memory`, or ``room`` bytes): the OOM killer would end the
+    command later without a word. ``tiledsimplify run`` holds a few tiles at a time instead."""
+    need = n * (PEAK_BYTES_PER_POINT + 24)  # and the (n, 3) float64 points themselves
+    if room is None:
+        room = machine.available_memory()
+    if room is not None and need > room:
+        raise InputError(
+            f"{name}: simplifying {n:,} points in memory needs about {machine.gb(need)}, but "
+            f"{machine.gb(room)} of memory is available. Use `tiledsimplify run {name} OUTPUT "
+            "--ratio R` instead: it simplifies tile by tile in memory bounded by the tile size "
+            "(LAS/LAZ, PLY, NPY or text output), or free memory.")
+
+
 def _simplify(args):
     t0 = time.perf_counter()
     check_output(args.output)
     check_not_input(args.output, [args.input])
-    xyz = read_xyz(args.input)[0]
+    source = open_source(args.input)
+    check_memory(args.input, source.count)
+    xyz = read_all(source)
     log.info("read %d points from %s in %.2f s", len(xyz), args.input, time.perf_counter() - t0)
     if len(xyz) == 0:
         raise TiledSimplifyError(f"{args.input}: the input has no points; nothing to simplify. "
@@ -312,7 +333,7 @@ def _simplify(args):
         log.warning("%s", degrees)
     options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
                               detect_boundary=not args.no_boundary)
-    if (os.cpu_count() or 1) > 1:  # a cold cache: all cores compile (at once if warm)
+    if machine.cpus() > 1:  # a cold cache: all cores compile (at once if warm)
         compile_cache.compile_all()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", BudgetWarning)

@@ -34,6 +34,8 @@ import numba
 from numba.core import types
 from numba.core.registry import CPUDispatcher
 
+from .. import machine
+
 log = logging.getLogger("tiledsimplify")
 
 #: the recorded kernels: ``module:function<TAB>seconds<TAB>signature repr`` per line
@@ -135,7 +137,7 @@ def compile_all(jobs=None, path=SIGNATURES, timeout=900.0):
     todo = missing(read_signatures(path))
     if not todo:
         return {"compiled": 0, "seconds": 0.0, "jobs": 0, "failed": []}
-    jobs = jobs or os.cpu_count() or 1
+    jobs = jobs or machine.cpus()
     parts = partition(todo, jobs)
     log.info("compiling %d kernels into the cache (%s) in %d process(es); once per machine",
              len(todo), cache_dir(), len(parts))

@@ -370,5 +370,10 @@ def read_xyz(spec):
     memory (``simplify``, ``evaluate``, ``report``); the chunks are checked finite as they
     are read (:func:`check_finite`; LAS/LAZ coordinates are integers)."""
     src = open_source(spec)
+    return read_all(src), src
+
+
+def read_all(src):
+    """Every point of an opened source (:func:`open_source`), as one (n, 3) float64 array."""
     parts = [xyz for _, xyz, _ in src.chunks()]
-    return (np.concatenate(parts) if parts else np.empty((0, 3))), src
+    return np.concatenate(parts) if parts else np.empty((0, 3))

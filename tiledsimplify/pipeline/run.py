@@ -29,7 +29,7 @@ import dask
 import numpy as np
 from dask.callbacks import Callback
 
-from .. import __version__
+from .. import __version__, machine
 from ..core import SimplifyOptions, compile_cache, edge_fit
 from ..core.result import resolve_target, short_message
 from ..errors import InputError, TiledSimplifyError
@@ -53,7 +53,13 @@ from .tile_task import (
     simplify_tile,
     threshold_from_histogram,
 )
-from .workers import check_workers, input_unreadable, killed_message
+from .workers import (
+    WORKER_BASE_MB,
+    check_workers,
+    input_unreadable,
+    killed_message,
+    tile_memory_mb,
+)
 
 log = logging.getLogger("tiledsimplify")
 
@@ -74,6 +80,7 @@ class RunSummary:
 
     ``seconds``: wall time per stage and ``total``; ``cpu_seconds``: CPU time of this process
     per stage (all its threads; not the work of other processes or cluster workers);
+    ``workers``: the local workers (threads or processes) the run used, None on a cluster.
     ``peak_rss_mb``: this process's peak resident memory so far (on local threads the run's
     own, whose size follows the tiles'; not that of worker processes), NaN where the system
     does not say.
@@ -95,6 +102,7 @@ class RunSummary:
     seconds: dict = field(default_factory=dict)
     cpu_seconds: dict = field(default_factory=dict)
     peak_rss_mb: float = float("nan")
+    workers: int | None = None
 
     def to_dict(self):
         return asdict(self)
@@ -290,7 +298,7 @@ def _ingest_parts(source, n, scheduler, workers, client):
     if client is not None:
         slots = sum(client.nthreads().values())
     else:
-        slots = int(workers or os.cpu_count() or 1)
+        slots = int(workers or machine.cpus())
     if slots < INGEST_PARTS_FROM:
         return None
     parts = source.parts(max(INGEST_PART_POINTS, math.ceil(n / (4 * slots))))
@@ -393,7 +401,7 @@ def _start_compile(client, scheduler, workers):
     if client is not None or scheduler not in SCHEDULERS:
         return None
     return compile_cache.start(
-        1 if scheduler == "synchronous" else workers or os.cpu_count() or 1)
+        1 if scheduler == "synchronous" else workers or machine.cpus())
 
 
 def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describe=None,
@@ -457,7 +465,7 @@ def _process_pool(workers):
     from dask.multiprocessing import get_context, initialize_worker_process
     if os.environ.get("PYTHONHASHSEED") in (None, "0"):
         os.environ["PYTHONHASHSEED"] = "6640"  # as dask sets it for the pools it makes
-    pool = ProcessPoolExecutor(workers or os.cpu_count() or 1, mp_context=get_context(),
+    pool = ProcessPoolExecutor(workers or machine.cpus(), mp_context=get_context(),
                                initializer=initialize_worker_process)
     try:
         yield pool
@@ -524,6 +532,63 @@ def default_tile_points(n):
     tiles of at most 125k); below 100k points a tile's halo grows large beside its core.
     """
     return int(min(MAX_TILE_POINTS, max(MIN_TILE_POINTS, math.ceil(n / MIN_TILES))))
+
+
+#: memory (MB) a local run keeps free beside its tiles: the kernels it has yet to load, the
+#: ingest's chunks, the cut and the output's buffers
+LOCAL_SPARE_MB = 300
+
+
+def local_workers(scheduler, workers, client, tile_points, room=None):
+    """The local worker count: ``workers`` if given, else one per CPU this process may use
+    (:func:`..machine.cpus`: its affinity and cgroup quota, not the host's core count) — fewer
+    if that many tiles of ``tile_points`` would not fit in the memory left
+    (:func:`..machine.available_memory`, or ``room`` bytes), with a warning; a warning too if
+    the given ``workers`` would not fit. ``workers`` unchanged for a cluster (its workers'
+    memory limits are checked there, :func:`.workers.check_workers`).
+
+    Each thread holds one tile (:func:`.workers.tile_memory_mb`); a process of the
+    "processes" scheduler its own interpreter and kernels as well. The output does not
+    depend on the count, so capping it only changes the time.
+    """
+    if client is not None or scheduler not in SCHEDULERS:
+        return workers
+    if scheduler == "synchronous":
+        return 1
+    per = tile_memory_mb(tile_points) - WORKER_BASE_MB
+    if scheduler == "processes":
+        per += WORKER_BASE_MB
+    if room is None:
+        room = machine.available_memory()
+    usable = machine.cpus()
+    if room is None:
+        return workers or usable
+    room_mb = room / 1e6 - LOCAL_SPARE_MB
+    fits = max(int(room_mb // per), 0)
+    want = workers or usable
+    if want <= fits:
+        return want
+
+    def need(w):
+        return machine.gb((w * per + LOCAL_SPARE_MB) * 1e6)
+    noun = "worker process" if scheduler == "processes" else "thread"
+    tiles = f"tiles of up to {tile_points:,} points"
+    if workers is None and fits >= 1:
+        log.warning("%d %s%s with %s need about %s but %s of memory is available: running %d "
+                    "instead of one per CPU; a smaller --tile-points runs more (the output does "
+                    "not depend on the worker count)", want, noun, "es" if noun[-1] == "s"
+                    else "s", tiles, need(want), machine.gb(room), fits)
+        return fits
+    want = workers or 1
+    smaller = max(int(room_mb / want / (per / tile_points)), 0)
+    log.warning("%d %s%s with %s need%s about %s but %s of memory is available; the run may "
+                "be killed for memory. Give %s--tile-points %s (the output does not depend on "
+                "the worker count; the tile size changes it slightly)", want, noun,
+                ("es" if noun[-1] == "s" else "s") if want > 1 else "", tiles,
+                "" if want > 1 else "s", need(want),
+                machine.gb(room), f"--workers {max(fits, 1)} or " if want > 1 else "",
+                f"{smaller:,}")
+    return want
 
 
 def run(input, output, *, ratio=None, count=None, options=None, client=None,
@@ -618,6 +683,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                     "mostly halo and run slowly; the default for this input is %s points",
                     f"{tile_points:,}", f"{n:,}", f"{math.ceil(n / tile_points):,}",
                     f"{default_tile_points(n):,}")
+    workers = local_workers(scheduler, workers, client, int(tile_points))
     opts = asdict(options)
     settings = {"tile_points": int(tile_points), "halo": halo, "options": opts,
                 "version": __version__}
@@ -774,7 +840,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          n_deeper=n_deeper,
                          store="" if store is None else str(store_path), output=str(output),
                          reached=reached, message=message, refined=refined, seconds=seconds,
-                         cpu_seconds=cpu_seconds, peak_rss_mb=_peak_rss_mb())
+                         cpu_seconds=cpu_seconds, peak_rss_mb=_peak_rss_mb(),
+                         workers=None if client is not None else workers)
     log.info("kept %d of %d points (%d boundary) from %d tiles (%d run deeper) in %.1f s "
              "(%.0f input points/s): %s", n_out, n, n_boundary, ts.n_tiles, n_deeper,
              seconds["total"], n / seconds["total"] if seconds["total"] else 0.0,

@@ -16,7 +16,7 @@ import secrets
 import socket
 from pathlib import Path
 
-from .. import __version__
+from .. import __version__, machine
 from ..errors import InputError, TiledSimplifyError
 
 log = logging.getLogger("tiledsimplify")
@@ -59,7 +59,7 @@ def probe(directory: str, token: str) -> dict:
             write_error = f"{type(exc).__name__}: {exc.strerror or exc}"
     from ..core import compile_cache
     return {"host": socket.gethostname(), "sees": sees, "write_error": write_error,
-            "version": __version__, "code": code_id(), "cpus": os.cpu_count() or 1,
+            "version": __version__, "code": code_id(), "cpus": machine.cpus(),
             "cache": str(compile_cache.cache_dir()), "cold": bool(compile_cache.missing())}
 
 
