@@ -85,8 +85,8 @@ def _parser():
         description="Simplify one point cloud in memory, keeping and flagging sharp-edge "
                     "points. Output columns: sharp_edge, importance (at removal; NaN for kept "
                     "points), simplify_rank (removal order; -1 for kept), nx, ny, nz.")
-    s.add_argument("input", help="LAS/LAZ (file, folder or glob), PLY, OBJ/OFF/STL (vertices), "
-                                 "XYZ/CSV/TXT or NPY; .gz allowed")
+    s.add_argument("input", help="LAS/LAZ (file, folder or glob), E57, PLY, OBJ/OFF/STL "
+                                 "(vertices), XYZ/CSV/TXT or NPY; .gz allowed")
     s.add_argument("output", help="output .ply, .npy, .xyz or .csv")
     g = s.add_mutually_exclusive_group(required=True)
     g.add_argument("--ratio", type=float, help="fraction of points to keep, in (0, 1]")
@@ -108,8 +108,8 @@ def _parser():
                     "global budget, refine the gaps and write one output. LAS/LAZ output keeps "
                     "every input dimension and adds sharp_edge, "
                     "importance, simplify_rank.")
-    r.add_argument("input", help="LAS/LAZ file, folder or glob of LAS/LAZ tiles; or PLY, "
-                                 "XYZ/CSV/TXT, NPY")
+    r.add_argument("input", help="LAS/LAZ file, folder or glob of LAS/LAZ tiles; or E57, "
+                                 "PLY, XYZ/CSV/TXT, NPY")
     r.add_argument("output", help="output .las/.laz (LAS input), .ply, .npy, .xyz or .csv")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--ratio", type=float, help="fraction of points to keep, in (0, 1]")

@@ -1,7 +1,7 @@
 """One way to read any supported input in chunks: ``open_source(spec)``.
 
-LAS/LAZ files, folders and globs stream through :class:`~tiledsimplify.io.las.LasSource`.
-NPY files and binary PLY files are memory-mapped and sliced; ASCII PLY and XYZ/CSV/TXT text is
+LAS/LAZ files, folders and globs stream through :class:`~tiledsimplify.io.las.LasSource`,
+E57 files through :class:`~tiledsimplify.io.e57.E57Source` (scan by scan, in chunks). NPY files and binary PLY files are memory-mapped and sliced; ASCII PLY and XYZ/CSV/TXT text is
 parsed a chunk of lines at a time. Memory is bounded by the chunk size in all these cases.
 Compressed (``.gz``) point files and meshes (OBJ/OFF/STL) are read whole.
 """
@@ -343,6 +343,9 @@ def open_source(spec, chunk_points=1_000_000):
     if not p.exists():
         raise FileNotFoundError(2, "No such file", str(p))
     suffix = p.suffix.lower()
+    if suffix == ".e57":
+        from .e57 import E57Source
+        return E57Source(p, chunk_points)
     if suffix == ".ply":
         src = _ply_source(p, chunk_points)
         if src is not None:

@@ -1,0 +1,154 @@
+"""E57 input: scans read in chunks, invalid points left out, poses and spherical coordinates
+applied, and the same simplification as from the same points in another format."""
+
+import importlib
+import sys
+import uuid
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from tiledsimplify.cli import EXIT_INPUT, EXIT_OK, main
+from tiledsimplify.errors import FileFormatError, InputError
+from tiledsimplify.io.sources import open_source, read_xyz
+
+pye57 = pytest.importorskip("pye57")
+libe57 = pye57.libe57
+run_mod = importlib.import_module("tiledsimplify.pipeline.run")
+
+
+def write_e57(path, scans):
+    """An E57 file of ``scans``: each ``{"fields": {name: array}, "rotation": (w, x, y, z),
+    "translation": (x, y, z)}`` (pose optional), coordinates in double precision (pye57's own
+    writer stores them as float32 and Cartesian only)."""
+    f = pye57.E57(str(path), mode="w")
+    imf = f.image_file
+    for i, sc in enumerate(scans):
+        fields = sc["fields"]
+        node = libe57.StructureNode(imf)
+        node.set("guid", libe57.StringNode(imf, f"{{{uuid.uuid4()}}}"))
+        node.set("name", libe57.StringNode(imf, f"scan {i}"))
+        if "rotation" in sc or "translation" in sc:
+            pose = libe57.StructureNode(imf)
+            node.set("pose", pose)
+            for key, names, default in (("rotation", "wxyz", (1.0, 0.0, 0.0, 0.0)),
+                                        ("translation", "xyz", (0.0, 0.0, 0.0))):
+                part = libe57.StructureNode(imf)
+                for k, v in zip(names, sc.get(key, default)):
+                    part.set(k, libe57.FloatNode(imf, float(v)))
+                pose.set(key, part)
+        proto = libe57.StructureNode(imf)
+        for name, arr in fields.items():
+            lo, hi = arr.min(), arr.max()
+            proto.set(name, libe57.FloatNode(imf, float(lo), libe57.E57_DOUBLE, float(lo),
+                                             float(hi)) if arr.dtype.kind == "f"
+                      else libe57.IntegerNode(imf, int(lo), int(lo), int(hi)))
+        points = libe57.CompressedVectorNode(imf, proto, libe57.VectorNode(imf, True))
+        node.set("points", points)
+        f.data3d.append(node)
+        n = len(next(iter(fields.values())))
+        arrays, buffers = f.make_buffers(list(fields), n)
+        for name, arr in fields.items():
+            arrays[name][:] = arr
+        writer = points.writer(buffers)
+        writer.write(n)
+        writer.close()
+    f.close()
+
+
+def cartesian(P, state=None):
+    out = {"cartesianX": P[:, 0], "cartesianY": P[:, 1], "cartesianZ": P[:, 2]}
+    if state is not None:
+        out["cartesianInvalidState"] = state
+    return out
+
+
+@pytest.fixture()
+def bunny(data_dir):
+    return read_xyz(data_dir / "meshes" / "stanford_bunny" / "bun_zipper.ply.gz")[0]
+
+
+def test_scans_are_read_in_chunks_in_the_files_frame(tmp_path):
+    rng = np.random.default_rng(0)
+    A, B = rng.random((1000, 3)) * 5, rng.random((700, 3)) * 5
+    state = np.zeros(len(A), dtype=np.int8)
+    state[::7] = 2  # no return
+    state[3::11] = 1  # a direction only
+    A_stored = A.copy()
+    A_stored[state != 0] = 1e6  # what a scanner leaves there is no position
+    rot = Rotation.from_euler("zyx", [30, -20, 75], degrees=True)
+    x, y, z, w = rot.as_quat()
+    t = np.array([100.0, -20.0, 3.5])
+    path = tmp_path / "two.e57"
+    write_e57(path, [{"fields": cartesian(A_stored, state)},
+                     {"fields": cartesian(B), "rotation": (w, x, y, z), "translation": t}])
+    expect = np.concatenate([A[state == 0], rot.apply(B) + t])
+    for chunk in (1, 97, 1000, 10 ** 6):
+        src = open_source(path, chunk_points=chunk)
+        assert src.count == len(expect) and not src.is_las and src.files == [path]
+        got = list(src.chunks())
+        assert all(len(xyz) <= chunk for _, xyz, _ in got)
+        assert [s for s, _, _ in got] == list(np.cumsum([0] + [len(c) for _, c, _ in got])[:-1])
+        np.testing.assert_allclose(np.concatenate([c for _, c, _ in got]), expect, rtol=0,
+                                   atol=1e-12)
+
+
+def test_spherical_scans_become_cartesian(tmp_path):
+    rng = np.random.default_rng(1)
+    P = rng.normal(size=(500, 3)) * 10
+    r = np.linalg.norm(P, axis=1)
+    fields = {"sphericalRange": r, "sphericalAzimuth": np.arctan2(P[:, 1], P[:, 0]),
+              "sphericalElevation": np.arcsin(P[:, 2] / r),
+              "sphericalInvalidState": np.r_[np.zeros(499, dtype=np.int8), 2]}
+    path = tmp_path / "sph.e57"
+    write_e57(path, [{"fields": fields, "translation": (1.0, 2.0, 3.0)}])
+    xyz, src = read_xyz(path)
+    assert src.count == 499
+    np.testing.assert_allclose(xyz, P[:499] + [1.0, 2.0, 3.0], rtol=0, atol=1e-9)
+
+
+def test_an_e57_simplifies_as_the_same_points_in_npy(bunny, tmp_path):
+    # the Bunny in two scans, the second stored in its scanner's frame with a pose
+    rot = Rotation.from_euler("xyz", [10, 40, -65], degrees=True)
+    t = np.array([0.3, -0.1, 0.05])
+    half = len(bunny) // 2
+    x, y, z, w = rot.as_quat()
+    e57 = tmp_path / "bunny.e57"
+    write_e57(e57, [{"fields": cartesian(bunny[:half])},
+                    {"fields": cartesian(rot.inv().apply(bunny[half:] - t)),
+                     "rotation": (w, x, y, z), "translation": t}])
+    xyz = read_xyz(e57)[0]
+    np.testing.assert_allclose(xyz, bunny, rtol=0, atol=1e-12)
+    npy = tmp_path / "bunny.npy"
+    np.save(npy, xyz)  # the same coordinates, bit for bit
+    outs = []
+    for src in (e57, npy):
+        out = tmp_path / f"{src.suffix[1:]}_out.npy"
+        run_mod.run(src, out, ratio=0.1, tile_points=12000, workers=2)
+        outs.append(np.load(out))
+    assert len(outs[0]) == round(0.1 * len(bunny))
+    assert outs[0].tobytes() == outs[1].tobytes()  # bit for bit (NaN importance of kept)
+    for src in (e57, npy):
+        assert main(["simplify", str(src), str(tmp_path / f"s_{src.suffix[1:]}.npy"),
+                     "--ratio", "0.1", "-q"]) == EXIT_OK
+    assert np.load(tmp_path / "s_e57.npy").tobytes() == np.load(tmp_path / "s_npy.npy").tobytes()
+
+
+def test_a_broken_or_unreadable_e57_is_named(tmp_path, monkeypatch, caplog):
+    bad = tmp_path / "bad.e57"
+    bad.write_bytes(b"ASTM-E57" + bytes(5000))
+    with pytest.raises(FileFormatError, match=r"bad\.e57: not a readable E57 file"):
+        open_source(bad)
+    good = tmp_path / "good.e57"
+    write_e57(good, [{"fields": cartesian(np.random.default_rng(2).random((5000, 3)))}])
+    cut = tmp_path / "cut.e57"
+    cut.write_bytes(good.read_bytes()[:3000])  # a copy that stopped part-way
+    with pytest.raises(FileFormatError, match=r"cut\.e57: not a readable E57 file"):
+        list(open_source(cut).chunks())
+    assert main(["run", str(bad), str(tmp_path / "o.laz"), "--ratio", "0.5", "-q"]) == EXIT_INPUT
+    assert "bad.e57: not a readable E57 file" in caplog.text
+    monkeypatch.setitem(sys.modules, "pye57", None)  # not installed
+    with pytest.raises(InputError, match=r"good\.e57: reading E57 files needs the pye57 "
+                                         r"package: pip install 'tiledsimplify\[e57\]'"):
+        open_source(good)
