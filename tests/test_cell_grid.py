@@ -74,6 +74,29 @@ def test_nearest_is_exact_with_ties_by_key(name, X, ties):
         assert n_ties > 0  # ties exist here, and the key decided them
 
 
+@pytest.mark.parametrize("name,X", list(_clouds()), ids=lambda v: v if isinstance(v, str) else "")
+@pytest.mark.parametrize("ties", ["hash", "constant"])
+def test_the_exact_search_gives_one_answer_by_every_path(name, X, ties, monkeypatch):
+    # few queries (compiled, every candidate), few pairs (numpy), many (a kd-tree's superset)
+    rng = np.random.default_rng(2)
+    ids = np.sort(rng.choice(len(X), len(X) // 5, replace=False))
+    tie = (coordinate_hash(X[ids]) if ties == "hash" else np.zeros(ids.size, dtype=np.uint64))
+    order = rng.choice(len(X), 150, replace=False)
+    reach = cKDTree(X[ids]).query(X[order])[0].max()
+    C = np.ascontiguousarray(X[ids])
+    for k, bound in ((16, 0.9 * reach), (4, 2.0 * reach), (1, 0.5 * reach), (16, 0.0)):
+        rd, ri, r_idx, r_dist = _expected(X, ids, tie, order, k, bound)
+        for few, pairs in ((cell_grid.FEW_QUERIES, cell_grid.BRUTE_PAIRS), (0, 1 << 30),
+                           (0, 0)):
+            monkeypatch.setattr(cell_grid, "FEW_QUERIES", few)
+            monkeypatch.setattr(cell_grid, "BRUTE_PAIRS", pairs)
+            d1, i1, start, idx, dist = cell_grid.exact_search(C, tie, X[order], k, bound)
+            np.testing.assert_array_equal(d1, rd)  # bit for bit
+            np.testing.assert_array_equal(i1, ri)
+            assert [idx[start[t]:start[t + 1]].tolist() for t in range(len(order))] == r_idx
+            assert [dist[start[t]:start[t + 1]].tolist() for t in range(len(order))] == r_dist
+
+
 def test_nearest_beyond_the_cells_is_left_to_the_caller():
     X = np.array([[0.0, 0, 0], [0.1, 0, 0], [5.0, 0, 0]])
     ids = np.array([0])
