@@ -1,7 +1,8 @@
 """One way to read any supported input in chunks: ``open_source(spec)``.
 
 LAS/LAZ files, folders and globs stream through :class:`~tiledsimplify.io.las.LasSource`,
-E57 files through :class:`~tiledsimplify.io.e57.E57Source` (scan by scan, in chunks). NPY files and binary PLY files are memory-mapped and sliced; ASCII PLY and XYZ/CSV/TXT text is
+E57 files through :class:`~tiledsimplify.io.e57.E57Source` (scan by scan, in chunks). NPY
+files and binary PLY files are memory-mapped and sliced; ASCII PLY and XYZ/CSV/TXT text is
 parsed a chunk of lines at a time. Memory is bounded by the chunk size in all these cases.
 Compressed (``.gz``) point files and meshes (OBJ/OFF/STL) are read whole.
 """
