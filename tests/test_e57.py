@@ -5,8 +5,10 @@ import importlib
 import sys
 import uuid
 
+import laspy
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from tiledsimplify.cli import EXIT_INPUT, EXIT_OK, main
@@ -20,8 +22,9 @@ run_mod = importlib.import_module("tiledsimplify.pipeline.run")
 
 def write_e57(path, scans):
     """An E57 file of ``scans``: each ``{"fields": {name: array}, "rotation": (w, x, y, z),
-    "translation": (x, y, z)}`` (pose optional), coordinates in double precision (pye57's own
-    writer stores them as float32 and Cartesian only)."""
+    "translation": (x, y, z), "limits": {group: {name: value}}}`` (pose and limits optional),
+    floats in double precision, their prototype bounds the data's (pye57's own writer stores
+    coordinates as float32 and Cartesian only)."""
     f = pye57.E57(str(path), mode="w")
     imf = f.image_file
     for i, sc in enumerate(scans):
@@ -38,6 +41,11 @@ def write_e57(path, scans):
                 for k, v in zip(names, sc.get(key, default)):
                     part.set(k, libe57.FloatNode(imf, float(v)))
                 pose.set(key, part)
+        for group, values in sc.get("limits", {}).items():
+            limits = libe57.StructureNode(imf)
+            for key, v in values.items():
+                limits.set(key, libe57.FloatNode(imf, float(v)))
+            node.set(group, limits)
         proto = libe57.StructureNode(imf)
         for name, arr in fields.items():
             lo, hi = arr.min(), arr.max()
@@ -152,3 +160,45 @@ def test_a_broken_or_unreadable_e57_is_named(tmp_path, monkeypatch, caplog):
     with pytest.raises(InputError, match=r"good\.e57: reading E57 files needs the pye57 "
                                          r"package: pip install 'tiledsimplify\[e57\]'"):
         open_source(good)
+
+
+def test_intensity_and_colour_reach_a_las_output(tmp_path):
+    rng = np.random.default_rng(5)
+    A, B = rng.random((3000, 3)), rng.random((2000, 3)) + [0.0, 0.0, 1.5]
+    # intensities as float32 values (pye57 reads and writes intensity through float32 buffers)
+    ia = (rng.random(3000) * 2.0).astype(np.float32).astype(np.float64)
+    ib = (rng.random(2000) * 7.0 + 3.0).astype(np.float32).astype(np.float64)
+    rgb = rng.integers(0, 256, (3000, 3)).astype(np.uint8)
+    state = np.zeros(3000, dtype=np.int8)
+    state[::5] = 2
+    path = tmp_path / "rgb.e57"
+    write_e57(path, [
+        {"fields": {**cartesian(A, state), "intensity": ia, "colorRed": rgb[:, 0],
+                    "colorGreen": rgb[:, 1], "colorBlue": rgb[:, 2]},
+         "limits": {"intensityLimits": {"intensityMinimum": 0.0, "intensityMaximum": 2.0},
+                    "colorLimits": {f"color{c}{m}": v for c in ("Red", "Green", "Blue")
+                                    for m, v in (("Minimum", 0), ("Maximum", 255))}}},
+        {"fields": {**cartesian(B), "intensity": ib}}])  # no limits: its bounds; no colour
+    src = open_source(path, chunk_points=700)
+    assert src.attributes == ["intensity", "red", "green", "blue"]
+    ok = state == 0
+    want = {"intensity": np.r_[np.rint(ia[ok] * (65535 / 2.0)),
+                               np.rint((ib - ib.min()) * (65535 / (ib.max() - ib.min())))],
+            "red": np.r_[rgb[ok, 0].astype(float) * 257, np.zeros(2000)],
+            "green": np.r_[rgb[ok, 1].astype(float) * 257, np.zeros(2000)],
+            "blue": np.r_[rgb[ok, 2].astype(float) * 257, np.zeros(2000)]}
+    chunks = list(src.chunks())
+    for name, values in want.items():
+        got = np.concatenate([a[name] for _, _, a in chunks])
+        assert got.dtype == np.uint16
+        np.testing.assert_array_equal(got, values)
+    out = tmp_path / "out.laz"
+    run_mod.run(path, out, ratio=0.3, tile_points=1500)
+    las = laspy.read(out)
+    assert las.header.point_format.id == 7 and len(las.points) == round(0.3 * src.count)
+    xyz = np.concatenate([c for _, c, _ in chunks])
+    d, i = cKDTree(xyz).query(np.c_[las.x, las.y, las.z])
+    assert d.max() < 1e-3 * 0.02  # each output point is an input point, quantised
+    for name, values in want.items():
+        np.testing.assert_array_equal(np.asarray(las[name]), values[i])
+    assert set(np.flatnonzero(i >= ok.sum())) and not np.asarray(las.red)[i >= ok.sum()].any()

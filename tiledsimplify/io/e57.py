@@ -8,8 +8,10 @@ no return, or a direction only) carry no position and are left out. Every chunk 
 common-frame coordinates, so the scans of a registered project come out as one cloud.
 
 Read through ``pye57`` (libE57Format), an optional dependency: ``pip install
-'tiledsimplify[e57]'``. Only positions are read; an output in LAS/LAZ from an E57 input is LAS
-1.4 point format 6, as from any input that is not LAS.
+'tiledsimplify[e57]'``. Besides positions, intensity and colour (where a scan has them) are
+carried as the LAS dimensions ``intensity`` and ``red``/``green``/``blue``, 16-bit, scaled from
+the range the scan declares (``intensityLimits``, ``colorLimits``, else its fields' bounds): a
+LAS/LAZ output of an E57 input is LAS 1.4 point format 6, or 7 with colour.
 """
 
 from pathlib import Path
@@ -20,6 +22,13 @@ from ..errors import FileFormatError, InputError
 
 CARTESIAN = ("cartesianX", "cartesianY", "cartesianZ")
 SPHERICAL = ("sphericalRange", "sphericalAzimuth", "sphericalElevation")
+#: E57 fields kept as LAS dimensions (16-bit, scaled from the scan's range of the field):
+#: LAS name -> (E57 field, the scan's limits group, its minimum and maximum children)
+KEPT = {"intensity": ("intensity", "intensityLimits", "intensityMinimum", "intensityMaximum"),
+        "red": ("colorRed", "colorLimits", "colorRedMinimum", "colorRedMaximum"),
+        "green": ("colorGreen", "colorLimits", "colorGreenMinimum", "colorGreenMaximum"),
+        "blue": ("colorBlue", "colorLimits", "colorBlueMinimum", "colorBlueMaximum")}
+COLOURS = ("red", "green", "blue")
 
 
 def _pye57(path):
@@ -53,10 +62,54 @@ def spherical_to_cartesian(r, azimuth, elevation):
     return np.stack([c * np.cos(azimuth), c * np.sin(azimuth), r * np.sin(elevation)], axis=1)
 
 
-class _Scan:
-    """One scan's layout: index, point count, coordinate fields, invalid-state field, pose."""
+def _number(node):
+    """The value of an E57 number node (float, integer or scaled integer)."""
+    scaled = getattr(node, "scaledValue", None)
+    return float(scaled() if scaled is not None else node.value())
 
-    def __init__(self, header, index, path):
+
+def _field_range(lib, scan_node, proto, field, group, lo_key, hi_key):
+    """``(lo, hi)`` of a field's values: the scan's limits (``intensityLimits``,
+    ``colorLimits``), else the bounds its prototype declares; None if neither gives a finite,
+    non-empty range (the values are then taken as 16-bit as they are)."""
+    found = []
+    try:
+        if scan_node.isDefined(group):
+            limits = scan_node[group]
+            found.append((_number(limits[lo_key]), _number(limits[hi_key])))
+    except lib.E57Exception:
+        pass
+    node = proto.get(field)
+    kind = node.type()
+    typed = {lib.NodeType.E57_FLOAT: lib.FloatNode, lib.NodeType.E57_INTEGER: lib.IntegerNode,
+             lib.NodeType.E57_SCALED_INTEGER: lib.ScaledIntegerNode}.get(kind)
+    if typed is not None:
+        t = typed(node)
+        if typed is lib.ScaledIntegerNode:
+            found.append((float(t.scaledMinimum()), float(t.scaledMaximum())))
+        else:
+            found.append((float(t.minimum()), float(t.maximum())))
+    for lo, hi in found:
+        if np.isfinite(lo) and np.isfinite(hi) and 0 < hi - lo < 1e12:
+            return lo, hi
+    return None
+
+
+def to_uint16(values, span):
+    """E57 values as a LAS 16-bit dimension: scaled from ``span`` = (lo, hi) to 0..65535
+    (8-bit colours 0..255 become v x 257), or clipped as they are where no range is known."""
+    v = np.asarray(values, dtype=np.float64)
+    if span is not None:
+        lo, hi = span
+        v = (v - lo) * (65535.0 / (hi - lo))
+    return np.clip(np.rint(v), 0, 65535).astype(np.uint16)
+
+
+class _Scan:
+    """One scan's layout: index, point count, coordinate fields, invalid-state field, pose,
+    and the fields kept as LAS dimensions with their ranges."""
+
+    def __init__(self, header, index, path, lib):
         self.index = index
         self.size = int(header.point_count)
         fields = set(header.point_fields)
@@ -71,6 +124,13 @@ class _Scan:
                 f"{', '.join(sorted(fields))}); export the scan with coordinates.")
         if self.state not in fields:
             self.state = None
+        proto = lib.StructureNode(header.points.prototype())
+        self.kept = {}  # LAS name -> (E57 field, range)
+        for name, (field, group, lo_key, hi_key) in KEPT.items():
+            if field in fields and (name not in COLOURS
+                                    or all(KEPT[c][0] in fields for c in COLOURS)):
+                self.kept[name] = (field, _field_range(lib, header.node, proto, field, group,
+                                                       lo_key, hi_key))
         self.rotation, self.translation = np.eye(3), np.zeros(3)
         node = header.node
         if node.isDefined("pose"):
@@ -100,11 +160,13 @@ class E57Source:
         self._pye57 = _pye57(self.path)
         with self._open() as f:
             try:
-                self._scans = [_Scan(f.get_header(i), i, self.path)
+                self._scans = [_Scan(f.get_header(i), i, self.path, self._pye57.libe57)
                                for i in range(f.scan_count)]
             except self._pye57.libe57.E57Exception as exc:
                 raise self._bad(exc) from None
             self._valid = [self._count_valid(f, s) for s in self._scans]
+        #: the LAS dimensions every chunk carries (0 where a scan lacks the field)
+        self.attributes = [name for name in KEPT if any(name in s.kept for s in self._scans)]
 
     def _bad(self, exc):
         return FileFormatError(f"{self.path}: not a readable E57 file ({exc}); check that the "
@@ -147,24 +209,31 @@ class E57Source:
                    for c in self._read(f, scan, [scan.state]))
 
     def chunks(self):
-        """``(start, xyz, {})`` chunks: ``start`` the first point's position among the valid
-        points of the whole file, scan after scan."""
+        """``(start, xyz, attrs)`` chunks: ``start`` the first point's position among the
+        valid points of the whole file, scan after scan; ``attrs`` the LAS dimensions of
+        :attr:`attributes` (uint16)."""
         from .sources import check_finite
         start = 0
         with self._open() as f:
             for scan in self._scans:
-                fields = list(scan.coords) + ([scan.state] if scan.state else [])
+                extra = [field for field, _ in scan.kept.values()]
+                fields = list(scan.coords) + extra + ([scan.state] if scan.state else [])
                 for c in self._read(f, scan, fields):
-                    a, b, d = (c[k].astype(np.float64) for k in scan.coords)
-                    if scan.state is not None:
-                        ok = c[scan.state] == 0
-                        a, b, d = a[ok], b[ok], d[ok]
+                    ok = c[scan.state] == 0 if scan.state is not None else slice(None)
+                    a, b, d = (c[k][ok].astype(np.float64) for k in scan.coords)
                     if not len(a):
                         continue
+                    attrs = {}
+                    for name in self.attributes:
+                        if name in scan.kept:
+                            field, span = scan.kept[name]
+                            attrs[name] = to_uint16(c[field][ok], span)
+                        else:
+                            attrs[name] = np.zeros(len(a), dtype=np.uint16)
                     if scan.coords is SPHERICAL:
                         xyz = spherical_to_cartesian(a, b, d)
                     else:
                         xyz = np.stack([a, b, d], axis=1)
                     xyz = xyz @ scan.rotation.T + scan.translation
-                    yield start, check_finite(xyz, start, self.files), {}
+                    yield start, check_finite(xyz, start, self.files), attrs
                     start += len(xyz)

@@ -752,8 +752,9 @@ def _short(text, limit=60):
 NEW_POINT_DEFAULTS = {"return_number": 1, "number_of_returns": 1}
 
 
-def new_header(lo, hi, spacing) -> laspy.LasHeader:
-    """A LAS 1.4 point format 6 header for points without a LAS origin (PLY, NPY, text).
+def new_header(lo, hi, spacing, colour=False) -> laspy.LasHeader:
+    """A LAS 1.4 point format 6 header for points without a LAS origin (PLY, NPY, text, E57);
+    point format 7 (format 6 with red, green, blue) if ``colour``.
 
     Scales: the largest power of ten at most a thousandth of ``spacing`` (the quantisation
     then moves a point by at most 0.0005 spacings), coarser only if the extent would not fit
@@ -766,7 +767,7 @@ def new_header(lo, hi, spacing) -> laspy.LasHeader:
     scale = 10.0 ** np.floor(np.log10(max(fine, need, 1e-300)))
     if scale < need:
         scale *= 10.0
-    header = laspy.LasHeader(point_format=6, version="1.4")
+    header = laspy.LasHeader(point_format=7 if colour else 6, version="1.4")
     header.scales = np.full(3, scale)
     header.offsets = lo
     return header

@@ -984,8 +984,8 @@ def _kept(ts, tile, prefix, refined):
 def _tile_piece(store_path, tile, prefix, refined, layout, is_las, start=None, expect=None):
     """What a LAS/LAZ output takes from one tile: ``(piece, boundary count)`` — its kept core
     points packed as the output's point records (:meth:`.LasLayout.pack`: quantised, checked,
-    with the three added dimensions; a non-LAS input's points get
-    :data:`~tiledsimplify.io.las.NEW_POINT_DEFAULTS`) — or None if it keeps none. Made
+    with the three added dimensions; a non-LAS input's points get the dimensions it carried,
+    else :data:`~tiledsimplify.io.las.NEW_POINT_DEFAULTS`) — or None if it keeps none. Made
     wherever this runs: on a cluster, a worker. With ``start``, the file's point where the
     tile's first kept point goes (a LAZ output on a cluster, :func:`_write_laz_chunks`), the
     piece is cut at the file's chunk boundaries and its whole chunks compressed
@@ -1004,8 +1004,11 @@ def _tile_piece(store_path, tile, prefix, refined, layout, is_las, start=None, e
     k = len(xyz)
     if is_las:
         attrs = {name: values[keep] for name, values in ts.attrs(tile).items()}
-    else:  # a new LAS 1.4 layout: the input had no point records to keep
-        attrs = {name: np.full(k, NEW_POINT_DEFAULTS.get(name, 0))
+    else:  # a new LAS 1.4 layout: the dimensions the input carried (E57 intensity, colour)
+        stored = ts.attrs(tile, [name for name in layout.attribute_names
+                                 if name in ts.attribute_names])
+        attrs = {name: stored[name][keep] if name in stored
+                 else np.full(k, NEW_POINT_DEFAULTS.get(name, 0))
                  for name in layout.attribute_names}
     piece = layout.pack(xyz, attrs, {"sharp_edge": boundary.astype(np.uint8),
                                      "importance": np.full(k, np.nan),
@@ -1092,7 +1095,8 @@ def _write_output(ts, source, output, prefix, refined=False, client=None):
             template = source.template_header()
         else:  # a new LAS 1.4 layout: the input had no point records to keep
             lo, hi = ts.root_attrs["bounds"]
-            template = new_header(lo, hi, ts.spacing)
+            template = new_header(lo, hi, ts.spacing, colour=all(
+                c in ts.attribute_names for c in ("red", "green", "blue")))
         with LasOutput(output, template) as out:
             if client is not None and output.suffix.lower() == ".laz":
                 return _write_laz_chunks(ts, out, prefix, refined, source.is_las, client,
