@@ -161,3 +161,76 @@ def test_a_run_on_degrees_warns(tmp_path, caplog):
     with caplog.at_level("WARNING", logger="tiledsimplify"):
         run(tmp_path / "m.npy", tmp_path / "o.npy", ratio=0.5)
     assert "degrees" not in caplog.text
+
+
+def _coloured_ply(path, X, rgb, fmt, code="uchar"):
+    """A PLY of ``X`` with red/green/blue properties of type ``code``, and a normal between
+    (the colours' columns are not next to x, y, z)."""
+    n = len(X)
+    kind = {"uchar": "u1", "ushort": "<u2", "float": "<f4"}[code]
+    head = (f"ply\nformat {fmt} 1.0\nelement vertex {n}\nproperty double x\nproperty double y\n"
+            f"property double z\nproperty float nx\nproperty {code} red\nproperty {code} green\n"
+            f"property {code} blue\nend_header\n").encode()
+    if fmt == "ascii":
+        body = "".join(f"{x!r} {y!r} {z!r} 0.5 {r} {g} {b}\n" for (x, y, z), (r, g, b)
+                       in zip(X.tolist(), rgb.tolist())).encode()
+    else:
+        rec = np.zeros(n, dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("nx", "<f4"),
+                                 ("red", kind), ("green", kind), ("blue", kind)])
+        rec["x"], rec["y"], rec["z"] = X.T
+        rec["red"], rec["green"], rec["blue"] = rgb.T
+        body = rec.tobytes()
+    path.write_bytes(head + body)
+
+
+@pytest.mark.parametrize("fmt,code", [("binary_little_endian", "uchar"), ("ascii", "uchar"),
+                                      ("binary_little_endian", "ushort"),
+                                      ("binary_little_endian", "float")])
+def test_ply_colours_are_read_as_las_colour(tmp_path, cloud, fmt, code):
+    rng = np.random.default_rng(3)
+    if code == "float":
+        rgb = rng.random((len(cloud), 3)).astype(np.float32)
+        want = np.clip(np.rint(rgb.astype(np.float64) * 65535), 0, 65535)
+    else:
+        top = 255 if code == "uchar" else 65535
+        rgb = rng.integers(0, top + 1, (len(cloud), 3))
+        want = rgb * (257 if code == "uchar" else 1)
+    path = tmp_path / "c.ply"
+    _coloured_ply(path, cloud, rgb, fmt, code)
+    src, xyz = _chunked(path, 100)
+    np.testing.assert_array_equal(xyz, cloud)
+    got = list(src.chunks())
+    for j, name in enumerate(("red", "green", "blue")):
+        values = np.concatenate([a[name] for _, _, a in got])
+        assert values.dtype == np.uint16
+        np.testing.assert_array_equal(values, want[:, j])
+    # parts read apart (another process) carry them too
+    parts = [c for part in src.parts(300) for c in part()]
+    for j, name in enumerate(("red", "green", "blue")):
+        np.testing.assert_array_equal(np.concatenate([a[name] for _, _, a in parts]),
+                                      want[:, j])
+
+
+def test_a_coloured_ply_keeps_its_colour_in_a_las_output(tmp_path):
+    import importlib
+
+    import laspy
+    from scipy.spatial import cKDTree
+    run = importlib.import_module("tiledsimplify.pipeline.run").run
+    rng = np.random.default_rng(4)
+    X = rng.random((5000, 3))
+    rgb = rng.integers(0, 256, (5000, 3))
+    path = tmp_path / "c.ply"
+    _coloured_ply(path, X, rgb, "binary_little_endian")
+    out = tmp_path / "out.laz"
+    run(path, out, ratio=0.25, tile_points=1500)
+    las = laspy.read(out)
+    assert las.header.point_format.id == 7 and len(las.points) == 1250
+    d, i = cKDTree(X).query(np.c_[las.x, las.y, las.z])
+    assert d.max() < 1e-4
+    for j, name in enumerate(("red", "green", "blue")):
+        np.testing.assert_array_equal(np.asarray(las[name]), rgb[i, j] * 257)
+    plain = tmp_path / "plain.ply"  # no colour: point format 6, as before
+    write_points(plain, X)
+    run(plain, tmp_path / "plain.laz", ratio=0.25, tile_points=1500)
+    assert laspy.read(tmp_path / "plain.laz").header.point_format.id == 6

@@ -18,6 +18,33 @@ from .las import LasSource, las_files, part_ranges
 from .mesh import _PLY_TYPES, _parse_ply_header, read_points
 
 TEXT_SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".asc")
+#: PLY vertex properties read as the LAS colour dimensions (all three, or none)
+PLY_COLOURS = {"red": ("red", "diffuse_red"), "green": ("green", "diffuse_green"),
+               "blue": ("blue", "diffuse_blue")}
+
+
+def ply_colours(names):
+    """``{"red": property, "green": …, "blue": …}`` of a PLY vertex's property ``names``, or
+    {} unless it has all three."""
+    found = {}
+    for las, candidates in PLY_COLOURS.items():
+        name = next((c for c in candidates if c in names), None)
+        if name is None:
+            return {}
+        found[las] = name
+    return found
+
+
+def colour_uint16(values, code):
+    """A PLY colour property (type ``code``, numpy's) as the LAS 16-bit colour: 8-bit v ->
+    257 v (255 -> 65535), 16-bit as it is, floats (0..1) -> 65535 v; clipped."""
+    kind = np.dtype(code)
+    v = np.asarray(values, dtype=np.float64)
+    if kind.kind == "f":
+        v = v * 65535.0
+    elif kind.itemsize == 1:
+        v = v * 257.0
+    return np.clip(np.rint(v), 0, 65535).astype(np.uint16)
 
 
 def check_finite(xyz, start, files):
@@ -86,9 +113,13 @@ class ArraySource:
     def _rows(arr, start, stop):
         return np.ascontiguousarray(arr[start:stop, :3], dtype=np.float64)
 
+    @staticmethod
+    def _attrs(arr, start, stop):
+        return {}
+
     def chunks(self):
         yield from _array_chunks(self._rows, self._xyz, 0, self.count, self.chunk_points,
-                                 self.files)
+                                 self.files, self._attrs)
 
     def parts(self, max_points=None):
         """Consecutive parts of at most ``max_points`` (whole chunks, at least one; None: one
@@ -100,13 +131,14 @@ class ArraySource:
                 for lo, hi in part_ranges(self.count, max_points, self.chunk_points)]
 
 
-def _array_chunks(rows, arr, lo, hi, chunk_points, files):
+def _array_chunks(rows, arr, lo, hi, chunk_points, files, attrs):
     """The chunks of ``arr`` (the mapped or held points) from point ``lo`` to ``hi - 1``, at
-    multiples of ``chunk_points``; ``rows(arr, start, stop)``: their float64 (m, 3) xyz."""
+    multiples of ``chunk_points``; ``rows(arr, start, stop)``: their float64 (m, 3) xyz,
+    ``attrs(arr, start, stop)``: the dimensions they carry."""
     for start in range(lo, hi, chunk_points):
         stop = min(start + chunk_points, hi)
         xyz = rows(arr, start, stop)
-        yield start, check_finite(xyz, start, files), {}
+        yield start, check_finite(xyz, start, files), attrs(arr, start, stop)
 
 
 class ColumnsSource(ArraySource):
@@ -116,6 +148,13 @@ class ColumnsSource(ArraySource):
     def _rows(arr, start, stop):
         part = arr[start:stop]
         return np.stack([part["x"], part["y"], part["z"]], axis=1).astype(np.float64)
+
+    @staticmethod
+    def _attrs(arr, start, stop):
+        """The LAS colour dimensions of a PLY vertex with colour properties."""
+        found = ply_colours(arr.dtype.names)
+        part = arr[start:stop] if found else None
+        return {las: colour_uint16(part[name], arr.dtype[name]) for las, name in found.items()}
 
 
 class MappedPart:
@@ -138,7 +177,7 @@ class MappedPart:
         path, offset, dtype, shape = self.mapped
         arr = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=shape)
         yield from _array_chunks(self.kind._rows, arr, self.lo, self.hi, self.chunk_points,
-                                 self.files)
+                                 self.files, self.kind._attrs)
 
 
 class TextSource:
@@ -149,13 +188,15 @@ class TextSource:
 
     is_las = False
 
-    def __init__(self, path, chunk_points, *, skip_lines, count, delimiter, offsets):
+    def __init__(self, path, chunk_points, *, skip_lines, count, delimiter, offsets,
+                 colour=None):
         self.files = [Path(path)]
         self.chunk_points = int(chunk_points)
         self._skip = skip_lines
         self._count = int(count)
         self._delimiter = delimiter
         self._offsets = list(offsets)
+        self._colour = colour  # an ASCII PLY's ((column, type) of red, green, blue)
 
     @property
     def count(self):
@@ -174,7 +215,8 @@ class TextSource:
         and read independently."""
         path = self.files[0].absolute()
         return [TextPart(path, self._offsets[lo // self.chunk_points], lo, hi,
-                         self.chunk_points, self._skip, self._delimiter, self._count)
+                         self.chunk_points, self._skip, self._delimiter, self._count,
+                         self._colour)
                 for lo, hi in part_ranges(self._count, max_points, self.chunk_points)]
 
 
@@ -216,11 +258,13 @@ class TextPart:
     chunks from byte ``offset``, where line ``skip + lo`` starts (``skip``: the header's lines,
     for the line numbers of errors); pickles."""
 
-    def __init__(self, path, offset, lo, hi, chunk_points, skip, delimiter, count):
+    def __init__(self, path, offset, lo, hi, chunk_points, skip, delimiter, count,
+                 colour=None):
         self.path, self.offset = Path(path), int(offset)
         self.lo, self.hi = int(lo), int(hi)
         self.chunk_points, self.skip = int(chunk_points), int(skip)
         self.delimiter, self.count = delimiter, int(count)
+        self.colour = colour
 
     def __call__(self):
         return self.chunks()
@@ -239,8 +283,9 @@ class TextPart:
                 if len(lines) < m:
                     raise FileFormatError(f"{path}: expected {self.count} points but the file "
                                           f"ends after {start + len(lines)}; it is truncated.")
+                cols = (0, 1, 2) + tuple(c for c, _ in (self.colour or ()))
                 try:
-                    xyz = np.loadtxt(lines, delimiter=self.delimiter, usecols=(0, 1, 2),
+                    got = np.loadtxt(lines, delimiter=self.delimiter, usecols=cols,
                                      dtype=np.float64, ndmin=2)
                 except ValueError as exc:
                     i, text, why = _first_bad_line(lines, self.delimiter)
@@ -250,7 +295,10 @@ class TextPart:
                     raise FileFormatError(f"{path}: unreadable point line at {where}; "
                                           "each line needs three numbers x y z; fix or remove "
                                           "it.") from None
-                yield start, check_finite(xyz, start, [path]), {}
+                xyz = np.ascontiguousarray(got[:, :3])
+                attrs = {las: colour_uint16(got[:, 3 + j], code)
+                         for j, (las, (_, code)) in enumerate(zip(PLY_COLOURS, self.colour or ()))}
+                yield start, check_finite(xyz, start, [path]), attrs
                 start += m
 
 
@@ -310,8 +358,13 @@ def _ply_source(path, chunk_points):
         if names[:3] != ["x", "y", "z"]:
             return None
         offsets = _scan_lines(path, header_lines, chunk_points, vertex.count)[2]
+        found = ply_colours(names)
+        colour = tuple((names.index(found[las]),
+                        _PLY_TYPES.get(vertex.props[names.index(found[las])].code,
+                                       vertex.props[names.index(found[las])].code))
+                       for las in PLY_COLOURS) if found else None
         return TextSource(path, chunk_points, skip_lines=header_lines, count=vertex.count,
-                          delimiter=None, offsets=offsets)
+                          delimiter=None, offsets=offsets, colour=colour)
     endian = "<" if fmt == "binary_little_endian" else ">"
     dtype = np.dtype([(p.name, endian + _PLY_TYPES.get(p.code, p.code)) for p in vertex.props])
     size = Path(path).stat().st_size
