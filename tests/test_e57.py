@@ -56,9 +56,12 @@ def write_e57(path, scans):
         node.set("points", points)
         f.data3d.append(node)
         n = len(next(iter(fields.values())))
-        arrays, buffers = f.make_buffers(list(fields), n)
-        for name, arr in fields.items():
-            arrays[name][:] = arr
+        buffers = libe57.VectorSourceDestBuffer()
+        keep = []
+        for name, arr in fields.items():  # the values' own type (pye57's: colour as uint8)
+            arr = np.ascontiguousarray(arr, dtype=arr.dtype if arr.dtype.kind in "iu" else "d")
+            keep.append(arr)
+            buffers.append(libe57.SourceDestBuffer(imf, name, arr, n, True, True))
         writer = points.writer(buffers)
         writer.write(n)
         writer.close()
@@ -202,3 +205,22 @@ def test_intensity_and_colour_reach_a_las_output(tmp_path):
     for name, values in want.items():
         np.testing.assert_array_equal(np.asarray(las[name]), values[i])
     assert set(np.flatnonzero(i >= ok.sum())) and not np.asarray(las.red)[i >= ok.sum()].any()
+
+
+def test_sixteen_bit_colour_is_read_whole(tmp_path):
+    # pye57's own buffers hold colour as uint8: a scan of 16-bit colour overflowed them
+    rng = np.random.default_rng(6)
+    P = rng.random((400, 3))
+    rgb = rng.integers(0, 65536, (400, 3)).astype(np.uint16)
+    path = tmp_path / "c16.e57"
+    write_e57(path, [{"fields": {**cartesian(P), "colorRed": rgb[:, 0], "colorGreen": rgb[:, 1],
+                                 "colorBlue": rgb[:, 2]},
+                      "limits": {"colorLimits": {f"color{c}{m}": v
+                                                 for c in ("Red", "Green", "Blue")
+                                                 for m, v in (("Minimum", 0),
+                                                              ("Maximum", 65535))}}}])
+    src = open_source(path, chunk_points=128)
+    assert src.attributes == ["red", "green", "blue"]
+    got = list(src.chunks())
+    for j, name in enumerate(("red", "green", "blue")):
+        np.testing.assert_array_equal(np.concatenate([a[name] for _, _, a in got]), rgb[:, j])

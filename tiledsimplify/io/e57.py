@@ -186,10 +186,22 @@ class E57Source:
     def __len__(self):
         return self.count
 
+    def _buffers(self, f, fields, n):
+        """Buffers of ``n`` values for ``fields``: float64 for every number (libE57Format
+        converts and scales into them: pye57's own buffers hold colour as uint8, which a scan
+        of 16-bit colour overflows), int8 for the invalid states."""
+        lib = self._pye57.libe57
+        arrays, buffers = {}, lib.VectorSourceDestBuffer()
+        for name in fields:
+            arr = np.empty(n, dtype=np.int8 if name.endswith("InvalidState") else np.float64)
+            arrays[name] = arr
+            buffers.append(lib.SourceDestBuffer(f.image_file, name, arr, n, True, True))
+        return arrays, buffers
+
     def _read(self, f, scan, fields):
         """The scan's ``fields`` in chunks of at most ``chunk_points``: yields dicts of arrays."""
         n = min(self.chunk_points, max(scan.size, 1))
-        arrays, buffers = f.make_buffers(list(fields), n)
+        arrays, buffers = self._buffers(f, list(fields), n)
         reader = f.get_header(scan.index).points.reader(buffers)
         try:
             while True:
@@ -220,7 +232,7 @@ class E57Source:
                 fields = list(scan.coords) + extra + ([scan.state] if scan.state else [])
                 for c in self._read(f, scan, fields):
                     ok = c[scan.state] == 0 if scan.state is not None else slice(None)
-                    a, b, d = (c[k][ok].astype(np.float64) for k in scan.coords)
+                    a, b, d = (c[k][ok] for k in scan.coords)  # used before the next read
                     if not len(a):
                         continue
                     attrs = {}
