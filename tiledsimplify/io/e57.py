@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileFormatError, InputError
+from .sources import check_finite, to_uint16
 
 CARTESIAN = ("cartesianX", "cartesianY", "cartesianZ")
 SPHERICAL = ("sphericalRange", "sphericalAzimuth", "sphericalElevation")
@@ -93,16 +94,6 @@ def _field_range(lib, scan_node, proto, field, group, lo_key, hi_key):
         if np.isfinite(lo) and np.isfinite(hi) and 0 < hi - lo < 1e12:
             return lo, hi
     return None
-
-
-def to_uint16(values, span):
-    """E57 values as a LAS 16-bit dimension: scaled from ``span`` = (lo, hi) to 0..65535
-    (8-bit colours 0..255 become v x 257), or clipped as they are where no range is known."""
-    v = np.asarray(values, dtype=np.float64)
-    if span is not None:
-        lo, hi = span
-        v = (v - lo) * (65535.0 / (hi - lo))
-    return np.clip(np.rint(v), 0, 65535).astype(np.uint16)
 
 
 class _Scan:
@@ -224,7 +215,6 @@ class E57Source:
         """``(start, xyz, attrs)`` chunks: ``start`` the first point's position among the
         valid points of the whole file, scan after scan; ``attrs`` the LAS dimensions of
         :attr:`attributes` (uint16)."""
-        from .sources import check_finite
         start = 0
         with self._open() as f:
             for scan in self._scans:

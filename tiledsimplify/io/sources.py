@@ -35,16 +35,23 @@ def ply_colours(names):
     return found
 
 
-def colour_uint16(values, code):
-    """A PLY colour property (type ``code``, numpy's) as the LAS 16-bit colour: 8-bit v ->
-    257 v (255 -> 65535), 16-bit as it is, floats (0..1) -> 65535 v; clipped."""
-    kind = np.dtype(code)
+def to_uint16(values, span):
+    """Values as a LAS 16-bit dimension (intensity, colour): scaled from ``span`` = (lo, hi)
+    to 0..65535 (0..255 becomes 257 v exactly), or taken as they are where ``span`` is None;
+    rounded and clipped."""
     v = np.asarray(values, dtype=np.float64)
-    if kind.kind == "f":
-        v = v * 65535.0
-    elif kind.itemsize == 1:
-        v = v * 257.0
+    if span is not None:
+        lo, hi = span
+        v = (v - lo) * (65535.0 / (hi - lo))
     return np.clip(np.rint(v), 0, 65535).astype(np.uint16)
+
+
+def colour_uint16(values, code):
+    """A PLY colour property of numpy type ``code`` as the LAS 16-bit colour (:func:`to_uint16`
+    from 0..255 for 8-bit types, 0..65535 for wider integers, 0..1 for floats)."""
+    kind = np.dtype(code)
+    span = (0.0, 1.0) if kind.kind == "f" else (0.0, 255.0) if kind.itemsize == 1 else None
+    return to_uint16(values, span)
 
 
 def check_finite(xyz, start, files):
@@ -358,11 +365,9 @@ def _ply_source(path, chunk_points):
         if names[:3] != ["x", "y", "z"]:
             return None
         offsets = _scan_lines(path, header_lines, chunk_points, vertex.count)[2]
-        found = ply_colours(names)
-        colour = tuple((names.index(found[las]),
-                        _PLY_TYPES.get(vertex.props[names.index(found[las])].code,
-                                       vertex.props[names.index(found[las])].code))
-                       for las in PLY_COLOURS) if found else None
+        codes = {p.name: _PLY_TYPES.get(p.code, p.code) for p in vertex.props}
+        found = ply_colours(names)  # their columns and types
+        colour = tuple((names.index(name), codes[name]) for name in found.values()) or None
         return TextSource(path, chunk_points, skip_lines=header_lines, count=vertex.count,
                           delimiter=None, offsets=offsets, colour=colour)
     endian = "<" if fmt == "binary_little_endian" else ">"
