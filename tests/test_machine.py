@@ -168,3 +168,21 @@ def test_a_run_short_of_memory_runs_fewer_workers_for_the_same_output(tmp_path, 
         assert ("running 1 instead of one per CPU" in caplog.text) == (name == "one")
         assert summary.workers == (1 if name == "one" else 4)
     np.testing.assert_array_equal(outs[0], outs[1])
+
+
+def test_evaluate_refuses_clouds_too_big_for_the_memory_left(tmp_path, monkeypatch, caplog,
+                                                            capsys):
+    from tiledsimplify import metrics
+    rng = np.random.default_rng(5)
+    X = rng.random((3000, 3))
+    orig, kept = tmp_path / "orig.npy", tmp_path / "kept.npy"
+    np.save(orig, X)
+    np.save(kept, X[::4])
+    need = (3000 + 750) * (metrics.EVALUATE_BYTES_PER_POINT + 24)
+    monkeypatch.setattr(machine, "available_memory", lambda *a, **k: need - 1)
+    assert main(["evaluate", str(orig), str(kept)]) == EXIT_INPUT
+    assert f"{orig} and {kept}: evaluating 3,750 points in memory needs about" in caplog.text
+    assert "crop both clouds to the same region" in caplog.text
+    monkeypatch.setattr(machine, "available_memory", lambda *a, **k: need)
+    assert main(["evaluate", str(orig), str(kept)]) == EXIT_OK
+    assert "hausdorff" in capsys.readouterr().out

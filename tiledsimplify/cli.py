@@ -31,7 +31,7 @@ from .io.points_out import (
     write_json,
     write_points,
 )
-from .io.sources import degrees_message, open_source, read_all, read_xyz
+from .io.sources import degrees_message, open_source, read_all
 
 log = logging.getLogger("tiledsimplify")
 
@@ -223,8 +223,12 @@ def _evaluate(args):
 
     from . import metrics, synthetic
     from .io import read_mesh
-    original = read_xyz(args.original)[0]
-    kept = read_xyz(args.simplified)[0]
+    sources = open_source(args.original), open_source(args.simplified)
+    check_memory(f"{args.original} and {args.simplified}", sum(s.count for s in sources),
+                 per_point=metrics.EVALUATE_BYTES_PER_POINT + 24, doing="evaluating",
+                 fix="Evaluate a part: crop both clouds to the same region first (e.g. `pdal "
+                     "translate in.laz part.laz crop --filters.crop.bounds=…`), or free memory.")
+    original, kept = (read_all(s) for s in sources)
     kw = {"spacing": args.spacing}
     if args.mesh:
         V, F = read_mesh(args.mesh)
@@ -302,19 +306,23 @@ def _run(args):
     return code
 
 
-def check_memory(name, n, room=None):
-    """Refuse to simplify ``n`` points in memory where that would need more than the memory
-    left (:func:`.machine.available_memory`, or ``room`` bytes): the OOM killer would end the
-    command later without a word. ``tiledsimplify run`` holds a few tiles at a time instead."""
-    need = n * (PEAK_BYTES_PER_POINT + 24)  # and the (n, 3) float64 points themselves
+def check_memory(name, n, room=None, per_point=PEAK_BYTES_PER_POINT + 24, doing="simplifying",
+                 fix=None):
+    """Refuse to hold ``n`` points in memory (``per_point`` bytes each at the peak; by default
+    :func:`simplify_points`'s and the (n, 3) float64 points themselves) where that would need
+    more than the memory left (:func:`.machine.available_memory`, or ``room`` bytes): the OOM
+    killer would end the command later without a word. ``fix`` says what to do instead; by
+    default ``tiledsimplify run``, which holds a few tiles at a time."""
+    need = n * per_point
     if room is None:
         room = machine.available_memory()
     if room is not None and need > room:
-        raise InputError(
-            f"{name}: simplifying {n:,} points in memory needs about {machine.gb(need)}, but "
-            f"{machine.gb(room)} of memory is available. Use `tiledsimplify run {name} OUTPUT "
-            "--ratio R` instead: it simplifies tile by tile in memory bounded by the tile size "
-            "(LAS/LAZ, PLY, NPY or text output), or free memory.")
+        fix = fix or (f"Use `tiledsimplify run {name} OUTPUT --ratio R` instead: it simplifies "
+                      "tile by tile in memory bounded by the tile size (LAS/LAZ, PLY, NPY or "
+                      "text output), or free memory.")
+        raise InputError(f"{name}: {doing} {n:,} points in memory needs about "
+                         f"{machine.gb(need)}, but {machine.gb(room)} of memory is available. "
+                         f"{fix}")
 
 
 def _simplify(args):

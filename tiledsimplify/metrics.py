@@ -1029,6 +1029,13 @@ def _ratio(k_f: int, n_f: int, k_r: int, n_r: int) -> float:
 # ---------------------------------------------------------------------------
 
 
+#: the peak memory of :func:`evaluate` per point of the two clouds beyond the points themselves,
+#: rounded up (bytes): 342 / 145 measured at 300k / 1M original points with 20 % kept
+#: (2026-12-03, the LAZ scan of ``benchmarks/pipeline_speed.py``, ``VmHWM`` less the RSS
+#: before the call). What the ``evaluate`` command checks against the memory left.
+EVALUATE_BYTES_PER_POINT = 400
+
+
 def evaluate(
     original: Any,
     kept: Any,
