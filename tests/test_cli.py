@@ -148,7 +148,8 @@ def test_bad_output_fails_before_the_work(cloud, tmp_path, caplog, monkeypatch):
     def no_work(*a, **k):
         raise AssertionError("the work started before the output was checked")
 
-    monkeypatch.setattr(cli, "read_xyz", no_work)
+    monkeypatch.setattr(cli, "open_source", no_work)
+    monkeypatch.setattr(cli, "read_all", no_work)
     monkeypatch.setattr(run_mod.TileStore, "create", no_work)
     missing = tmp_path / "no_such_dir" / "out.ply"
     for command in ("simplify", "run"):

@@ -186,3 +186,10 @@ def test_evaluate_refuses_clouds_too_big_for_the_memory_left(tmp_path, monkeypat
     monkeypatch.setattr(machine, "available_memory", lambda *a, **k: need)
     assert main(["evaluate", str(orig), str(kept)]) == EXIT_OK
     assert "hausdorff" in capsys.readouterr().out
+
+    # report holds both too
+    out = tmp_path / "rep"
+    monkeypatch.setattr(machine, "available_memory", lambda *a, **k: need - 1)
+    assert main(["report", str(orig), str(kept), "-o", str(out)]) == EXIT_INPUT
+    assert f"{orig} and {kept}: reporting on 3,750 points in memory needs about" in caplog.text
+    assert "Report on a part: crop both clouds" in caplog.text and not out.exists()

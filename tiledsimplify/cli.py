@@ -204,8 +204,23 @@ def _compile(args):
     return EXIT_ERROR if done["failed"] else EXIT_OK
 
 
+def _check_pair(original, simplified, doing, verb):
+    """Open both clouds of ``evaluate`` / ``report`` and refuse them now if holding both would
+    need more than the memory left (:func:`check_memory`, ``metrics.EVALUATE_BYTES_PER_POINT``
+    a point of either). Returns the two sources."""
+    from . import metrics
+    sources = open_source(original), open_source(simplified)
+    check_memory(f"{original} and {simplified}", sum(s.count for s in sources),
+                 per_point=metrics.EVALUATE_BYTES_PER_POINT + 24, doing=doing,
+                 fix=f"{verb} a part: crop both clouds to "
+                     "the same region first (e.g. `pdal translate in.laz part.laz crop "
+                     "--filters.crop.bounds=…`), or free memory.")
+    return sources
+
+
 def _report(args):
     from .report import make_report
+    _check_pair(args.input, args.result, "reporting on", "Report on")
     try:
         elev, azim = (float(v) for v in args.view.split(","))
     except ValueError:
@@ -223,11 +238,7 @@ def _evaluate(args):
 
     from . import metrics, synthetic
     from .io import read_mesh
-    sources = open_source(args.original), open_source(args.simplified)
-    check_memory(f"{args.original} and {args.simplified}", sum(s.count for s in sources),
-                 per_point=metrics.EVALUATE_BYTES_PER_POINT + 24, doing="evaluating",
-                 fix="Evaluate a part: crop both clouds to the same region first (e.g. `pdal "
-                     "translate in.laz part.laz crop --filters.crop.bounds=…`), or free memory.")
+    sources = _check_pair(args.original, args.simplified, "evaluating", "Evaluate")
     original, kept = (read_all(s) for s in sources)
     kw = {"spacing": args.spacing}
     if args.mesh:
