@@ -224,3 +224,33 @@ def test_sixteen_bit_colour_is_read_whole(tmp_path):
     got = list(src.chunks())
     for j, name in enumerate(("red", "green", "blue")):
         np.testing.assert_array_equal(np.concatenate([a[name] for _, _, a in got]), rgb[:, j])
+
+
+def test_a_project_exported_scan_by_scan_reads_as_one_cloud(bunny, tmp_path, data_dir):
+    # one registered project, one E57 file a scan station: a folder, a glob or a list of them
+    half = len(bunny) // 2
+    rot = Rotation.from_euler("z", 120, degrees=True)
+    x, y, z, w = rot.as_quat()
+    t = np.array([0.0, 0.2, 0.0])
+    folder = tmp_path / "project"
+    folder.mkdir()
+    write_e57(folder / "st01.e57", [{"fields": cartesian(bunny[:half])}])
+    write_e57(folder / "st02.e57", [{"fields": cartesian(rot.inv().apply(bunny[half:] - t)),
+                                     "rotation": (w, x, y, z), "translation": t}])
+    (folder / "notes.txt").write_text("station log")
+    for spec in (folder, str(folder / "*.e57"), [folder / "st01.e57", folder / "st02.e57"]):
+        xyz, src = read_xyz(spec)
+        assert [p.name for p in src.files] == ["st01.e57", "st02.e57"]
+        np.testing.assert_allclose(xyz, bunny, rtol=0, atol=1e-12)
+    out = tmp_path / "out.npy"
+    run_mod.run(folder, out, ratio=0.1, tile_points=12000)
+    assert len(np.load(out)) == round(0.1 * len(bunny))
+    # a folder that holds LAS/LAZ tiles is read as LAS tiles, as before
+    import shutil
+    shutil.copy(data_dir / "lidar" / "autzen_trim.laz", folder / "tile.laz")
+    assert open_source(folder).is_las
+    # a broken file among them is named
+    (folder / "tile.laz").unlink()
+    (folder / "st03.e57").write_bytes(b"ASTM-E57" + bytes(4000))
+    with pytest.raises(FileFormatError, match=r"st03\.e57: not a readable E57 file"):
+        open_source(folder)

@@ -108,8 +108,8 @@ def _parser():
                     "global budget, refine the gaps and write one output. LAS/LAZ output keeps "
                     "every input dimension and adds sharp_edge, "
                     "importance, simplify_rank.")
-    r.add_argument("input", help="LAS/LAZ file, folder or glob of LAS/LAZ tiles; or E57, "
-                                 "PLY, XYZ/CSV/TXT, NPY")
+    r.add_argument("input", help="LAS/LAZ file, folder or glob of LAS/LAZ tiles; E57 file, "
+                                 "folder or glob; or PLY, XYZ/CSV/TXT, NPY")
     r.add_argument("output", help="output .las/.laz (LAS input), .ply, .npy, .xyz or .csv")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--ratio", type=float, help="fraction of points to keep, in (0, 1]")

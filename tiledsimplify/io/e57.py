@@ -5,7 +5,8 @@ frame — Cartesian (``cartesianX/Y/Z``) or spherical (``sphericalRange/Azimuth/
 and a pose (a unit quaternion and a translation) that places it in the file's common frame.
 Points a scanner marks invalid (``cartesianInvalidState`` / ``sphericalInvalidState`` not 0:
 no return, or a direction only) carry no position and are left out. Every chunk holds
-common-frame coordinates, so the scans of a registered project come out as one cloud.
+common-frame coordinates, so the scans of a registered project come out as one cloud — from
+one file, or from a folder, glob or list of files exported one a scan station (:func:`e57_files`).
 
 Read through ``pye57`` (libE57Format), an optional dependency: ``pip install
 'tiledsimplify[e57]'``. Besides positions, intensity and colour (where a scan has them) are
@@ -14,6 +15,8 @@ the range the scan declares (``intensityLimits``, ``colorLimits``, else its fiel
 LAS/LAZ output of an E57 input is LAS 1.4 point format 6, or 7 with colour.
 """
 
+import glob
+import os
 from pathlib import Path
 
 import numpy as np
@@ -134,9 +137,38 @@ class _Scan:
                 self.translation = np.array([float(t[k].value()) for k in "xyz"])
 
 
+def e57_files(spec):
+    """The E57 files a folder, glob pattern or list of paths names — or None if it names a
+    LAS/LAZ file (read as LAS tiles then) or no E57 file. Sorted within a folder or pattern,
+    without duplicates."""
+    out, seen = [], set()
+    for one in spec if isinstance(spec, (list, tuple)) else [spec]:
+        path, text = Path(one), os.fspath(one)
+        if path.is_file():
+            found = [path]
+        elif path.is_dir():
+            found = sorted(p for p in path.iterdir() if p.is_file())
+        elif any(ch in text for ch in "*?["):
+            found = sorted(Path(p) for p in glob.glob(text, recursive=True) if Path(p).is_file())
+        else:
+            return None
+        for p in found:
+            suffix = p.suffix.lower()
+            if suffix in (".las", ".laz"):
+                return None
+            key = os.path.abspath(p)
+            if suffix == ".e57" and key not in seen:
+                seen.add(key)
+                out.append(p)
+    return out or None
+
+
 class E57Source:
-    """Chunks of an E57 file's valid points in its common frame (the interface of
-    :class:`~tiledsimplify.io.sources.ArraySource`: ``count``, ``chunks()``, ``files``).
+    """Chunks of the valid points of one or more E57 files, each in its common frame, file
+    after file and scan after scan (the interface of
+    :class:`~tiledsimplify.io.sources.ArraySource`: ``count``, ``chunks()``, ``files``). Files
+    exported scan by scan from one registered project share its frame and come out as one
+    cloud.
 
     ``count`` is exact: where a scan marks invalid points, their states are read once when the
     source is opened (one field, in chunks), so a run knows its target before the ingest.
@@ -144,35 +176,44 @@ class E57Source:
 
     is_las = False
 
-    def __init__(self, path, chunk_points=1_000_000):
-        self.path = Path(path)
-        self.files = [self.path]
+    def __init__(self, paths, chunk_points=1_000_000):
+        paths = paths if isinstance(paths, (list, tuple)) else [paths]
+        self.files = [Path(p) for p in paths]
         self.chunk_points = max(int(chunk_points), 1)
-        self._pye57 = _pye57(self.path)
-        with self._open() as f:
-            try:
-                self._scans = [_Scan(f.get_header(i), i, self.path, self._pye57.libe57)
-                               for i in range(f.scan_count)]
-            except self._pye57.libe57.E57Exception as exc:
-                raise self._bad(exc) from None
-            self._valid = [self._count_valid(f, s) for s in self._scans]
+        self._pye57 = _pye57(self.files[0])
+        self._scans, self._valid = [], []  # per file
+        for path in self.files:
+            with self._open(path) as f:
+                try:
+                    scans = [_Scan(f.get_header(i), i, path, self._pye57.libe57)
+                             for i in range(f.scan_count)]
+                except self._pye57.libe57.E57Exception as exc:
+                    raise self._bad(path, exc) from None
+                self._scans.append(scans)
+                self._valid.append([self._count_valid(f, path, s) for s in scans])
         #: the LAS dimensions every chunk carries (0 where a scan lacks the field)
-        self.attributes = [name for name in KEPT if any(name in s.kept for s in self._scans)]
+        self.attributes = [name for name in KEPT
+                           if any(name in s.kept for scans in self._scans for s in scans)]
 
-    def _bad(self, exc):
-        return FileFormatError(f"{self.path}: not a readable E57 file ({exc}); check that the "
+    @property
+    def path(self):
+        return self.files[0]
+
+    @staticmethod
+    def _bad(path, exc):
+        return FileFormatError(f"{path}: not a readable E57 file ({exc}); check that the "
                                "file is complete (a copy that stopped part-way), or export it "
                                "again.")
 
-    def _open(self):
+    def _open(self, path):
         try:
-            return self._pye57.E57(str(self.path))
+            return self._pye57.E57(str(path))
         except (self._pye57.libe57.E57Exception, OSError) as exc:
-            raise self._bad(exc) from None
+            raise self._bad(path, exc) from None
 
     @property
     def count(self):
-        return int(sum(self._valid))
+        return int(sum(sum(v) for v in self._valid))
 
     def __len__(self):
         return self.count
@@ -189,7 +230,7 @@ class E57Source:
             buffers.append(lib.SourceDestBuffer(f.image_file, name, arr, n, True, True))
         return arrays, buffers
 
-    def _read(self, f, scan, fields):
+    def _read(self, f, path, scan, fields):
         """The scan's ``fields`` in chunks of at most ``chunk_points``: yields dicts of arrays."""
         n = min(self.chunk_points, max(scan.size, 1))
         arrays, buffers = self._buffers(f, list(fields), n)
@@ -201,41 +242,46 @@ class E57Source:
                     break
                 yield {k: v[:got] for k, v in arrays.items()}
         except self._pye57.libe57.E57Exception as exc:
-            raise self._bad(exc) from None
+            raise self._bad(path, exc) from None
         finally:
             reader.close()
 
-    def _count_valid(self, f, scan):
+    def _count_valid(self, f, path, scan):
         if scan.state is None:
             return scan.size
         return sum(int(np.count_nonzero(c[scan.state] == 0))
-                   for c in self._read(f, scan, [scan.state]))
+                   for c in self._read(f, path, scan, [scan.state]))
 
     def chunks(self):
         """``(start, xyz, attrs)`` chunks: ``start`` the first point's position among the
-        valid points of the whole file, scan after scan; ``attrs`` the LAS dimensions of
-        :attr:`attributes` (uint16)."""
+        valid points of all the files, file after file and scan after scan; ``attrs`` the LAS
+        dimensions of :attr:`attributes` (uint16)."""
         start = 0
-        with self._open() as f:
-            for scan in self._scans:
-                extra = [field for field, _ in scan.kept.values()]
-                fields = list(scan.coords) + extra + ([scan.state] if scan.state else [])
-                for c in self._read(f, scan, fields):
-                    ok = c[scan.state] == 0 if scan.state is not None else slice(None)
-                    a, b, d = (c[k][ok] for k in scan.coords)  # used before the next read
-                    if not len(a):
-                        continue
-                    attrs = {}
-                    for name in self.attributes:
-                        if name in scan.kept:
-                            field, span = scan.kept[name]
-                            attrs[name] = to_uint16(c[field][ok], span)
-                        else:
-                            attrs[name] = np.zeros(len(a), dtype=np.uint16)
-                    if scan.coords is SPHERICAL:
-                        xyz = spherical_to_cartesian(a, b, d)
-                    else:
-                        xyz = np.stack([a, b, d], axis=1)
-                    xyz = xyz @ scan.rotation.T + scan.translation
-                    yield start, check_finite(xyz, start, self.files), attrs
-                    start += len(xyz)
+        for path, scans in zip(self.files, self._scans):
+            with self._open(path) as f:
+                for scan in scans:
+                    for xyz, attrs in self._scan_chunks(f, path, scan):
+                        yield start, check_finite(xyz, start, [path]), attrs
+                        start += len(xyz)
+
+    def _scan_chunks(self, f, path, scan):
+        """``(xyz, attrs)`` of a scan's valid points, chunk by chunk, in the file's frame."""
+        extra = [field for field, _ in scan.kept.values()]
+        fields = list(scan.coords) + extra + ([scan.state] if scan.state else [])
+        for c in self._read(f, path, scan, fields):
+            ok = c[scan.state] == 0 if scan.state is not None else slice(None)
+            a, b, d = (c[k][ok] for k in scan.coords)  # used before the next read
+            if not len(a):
+                continue
+            attrs = {}
+            for name in self.attributes:
+                if name in scan.kept:
+                    field, span = scan.kept[name]
+                    attrs[name] = to_uint16(c[field][ok], span)
+                else:
+                    attrs[name] = np.zeros(len(a), dtype=np.uint16)
+            if scan.coords is SPHERICAL:
+                xyz = spherical_to_cartesian(a, b, d)
+            else:
+                xyz = np.stack([a, b, d], axis=1)
+            yield xyz @ scan.rotation.T + scan.translation, attrs
