@@ -86,8 +86,9 @@ def test_a_process_pinned_to_one_cpu_runs_one_worker():
     assert out[1:] == ["1", "1", "1"]
 
 
-def test_local_workers_fit_the_memory_left(caplog):
-    cpus = machine.cpus()
+def test_local_workers_fit_the_memory_left(caplog, monkeypatch):
+    cpus = 4  # more than fit below, whatever the machine (on 2 CPUs the cap was never asked)
+    monkeypatch.setattr(machine, "cpus", lambda: cpus)
     tile = 500_000  # ~300 MB a thread by workers.tile_memory_mb
     per = run_mod.tile_memory_mb(tile) - run_mod.WORKER_BASE_MB
     plenty = 10 ** 12

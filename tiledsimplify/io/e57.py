@@ -195,10 +195,6 @@ class E57Source:
         self.attributes = [name for name in KEPT
                            if any(name in s.kept for scans in self._scans for s in scans)]
 
-    @property
-    def path(self):
-        return self.files[0]
-
     @staticmethod
     def _bad(path, exc):
         return FileFormatError(f"{path}: not a readable E57 file ({exc}); check that the "

@@ -393,12 +393,10 @@ def _is_las_spec(spec):
 
 def open_source(spec, chunk_points=1_000_000):
     """A chunked reader for ``spec``: ``.count``, ``.chunks()``, ``.files``, ``.is_las``."""
-    if isinstance(spec, (list, tuple)) or Path(spec).is_dir() or any(
-            ch in str(spec) for ch in "*?["):
-        from .e57 import E57Source, e57_files
-        files = e57_files(spec)  # a folder, pattern or list of E57 files (and no LAS/LAZ)
-        if files:
-            return E57Source(files, chunk_points)
+    from .e57 import E57Source, e57_files
+    files = e57_files(spec)  # an E57 file, or a folder, pattern or list of them (no LAS/LAZ)
+    if files:
+        return E57Source(files, chunk_points)
     if _is_las_spec(spec):
         las_files(spec)  # FileNotFoundError naming the spec if nothing matches
         src = LasSource(spec, chunk_points=chunk_points)
@@ -408,9 +406,6 @@ def open_source(spec, chunk_points=1_000_000):
     if not p.exists():
         raise FileNotFoundError(2, "No such file", str(p))
     suffix = p.suffix.lower()
-    if suffix == ".e57":
-        from .e57 import E57Source
-        return E57Source(p, chunk_points)
     if suffix == ".ply":
         src = _ply_source(p, chunk_points)
         if src is not None:

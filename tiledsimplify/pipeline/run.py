@@ -555,9 +555,8 @@ def local_workers(scheduler, workers, client, tile_points, room=None):
         return workers
     if scheduler == "synchronous":
         return 1
-    per = tile_memory_mb(tile_points) - WORKER_BASE_MB
-    if scheduler == "processes":
-        per += WORKER_BASE_MB
+    # MB a worker adds: its tile, and for a process its own interpreter and kernels too
+    per = tile_memory_mb(tile_points) - (0 if scheduler == "processes" else WORKER_BASE_MB)
     if room is None:
         room = machine.available_memory()
     usable = machine.cpus()
@@ -569,25 +568,22 @@ def local_workers(scheduler, workers, client, tile_points, room=None):
     if want <= fits:
         return want
 
-    def need(w):
-        return machine.gb((w * per + LOCAL_SPARE_MB) * 1e6)
-    noun = "worker process" if scheduler == "processes" else "thread"
-    tiles = f"tiles of up to {tile_points:,} points"
+    def what(w):  # "2 threads with tiles of up to … need about 0.9 GB but …"
+        noun = ("worker process", "worker processes") if scheduler == "processes" else (
+            "thread", "threads")
+        need = machine.gb((w * per + LOCAL_SPARE_MB) * 1e6)
+        return (f"{w} {noun[w > 1]} with tiles of up to {tile_points:,} points "
+                f"need{'' if w > 1 else 's'} about {need} but {machine.gb(room)} of memory is "
+                "available")
     if workers is None and fits >= 1:
-        log.warning("%d %s%s with %s need about %s but %s of memory is available: running %d "
-                    "instead of one per CPU; a smaller --tile-points runs more (the output does "
-                    "not depend on the worker count)", want, noun, "es" if noun[-1] == "s"
-                    else "s", tiles, need(want), machine.gb(room), fits)
+        log.warning("%s: running %d instead of one per CPU; a smaller --tile-points runs more "
+                    "(the output does not depend on the worker count)", what(want), fits)
         return fits
     want = workers or 1
     smaller = max(int(room_mb / want / (per / tile_points)), 0)
-    log.warning("%d %s%s with %s need%s about %s but %s of memory is available; the run may "
-                "be killed for memory. Give %s--tile-points %s (the output does not depend on "
-                "the worker count; the tile size changes it slightly)", want, noun,
-                ("es" if noun[-1] == "s" else "s") if want > 1 else "", tiles,
-                "" if want > 1 else "s", need(want),
-                machine.gb(room), f"--workers {max(fits, 1)} or " if want > 1 else "",
-                f"{smaller:,}")
+    log.warning("%s; the run may be killed for memory. Give %s--tile-points %s (the output "
+                "does not depend on the worker count; the tile size changes it slightly)",
+                what(want), f"--workers {max(fits, 1)} or " if want > 1 else "", f"{smaller:,}")
     return want
 
 
@@ -1137,8 +1133,8 @@ def _write_laz_chunks(ts, out, prefix, refined, is_las, client, counts, written)
     (``counts``) are packed and cut at the file's chunk boundaries there (:func:`_tile_piece`
     with the file's point where they start), its whole chunks compressed; each chunk that
     straddles tiles is compressed by a task from the tail of one and the heads of the next
-    (:meth:`.LasLayout.compress`). The client writes the chunks in order and grows the header by each tile's summary: the file
-    laspy would write (:class:`.las_pieces.ChunkWriter`). ``READ_AHEAD`` tiles per worker
+    (:meth:`.LasLayout.compress`). The client writes the chunks in order and grows the header
+    by each tile's summary: the file laspy would write (:class:`.las_pieces.ChunkWriter`). ``READ_AHEAD`` tiles per worker
     thread are in flight. Returns ``(points, boundary points)``."""
     from ..io.las_pieces import straddles
     n = ts.n_tiles
