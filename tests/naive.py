@@ -342,3 +342,31 @@ def global_cut_by_sorting(sequences, n_remove):
     for _, t, _ in keys[:max(int(n_remove), 0)]:
         cut[t] += 1
     return cut
+
+
+def disk_sample(X, neighbours, fixed, order, r):
+    """:func:`tiledsimplify.core.prethin.disk_sample` by sets: keep the fixed points, then each
+    point of ``order`` not reachable from a kept point ``p`` along graph edges through points
+    within ``r`` of ``p``."""
+    n = len(X)
+    keep = np.zeros(n, dtype=bool)
+    covered = np.zeros(n, dtype=bool)
+
+    def cover(p):
+        seen, todo = {p}, [p]
+        while todo:
+            a = todo.pop()
+            for q in neighbours[a]:
+                if q not in seen and np.sum((X[q] - X[p]) ** 2) <= r * r:
+                    seen.add(q)
+                    todo.append(q)
+        covered[list(seen)] = True
+
+    for p in np.flatnonzero(fixed):
+        keep[p] = True
+        cover(p)
+    for p in order:
+        if not covered[p]:
+            keep[p] = True
+            cover(p)
+    return keep

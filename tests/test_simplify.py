@@ -16,8 +16,9 @@ def _surface(n, seed=0):
 
 
 #: the greedy alone: the refinement (tests/test_refine.py) changes the kept set at the requested
-#: count only, so results compared with ``order`` and ``keep_at`` are taken without it
-GREEDY = SimplifyOptions(refine=False)
+#: count only, so results compared with ``order`` and ``keep_at`` are taken without it; the
+#: pre-thinning aims at the requested count (``prethin_target`` fixes it: tested below)
+GREEDY = SimplifyOptions(refine=False, prethin=0)
 
 
 @pytest.fixture(scope="module")
@@ -58,9 +59,30 @@ def test_keep_at_equals_a_fresh_run(res_surface, ratio):
     assert res.keep_at(count=int(round(ratio * len(X)))).sum() == int(round(ratio * len(X)))
 
 
+@pytest.mark.parametrize("ratio", [0.05, 0.1, 0.5])
+def test_keep_at_with_prethinning_equals_a_run_thinned_alike(ratio):
+    """With pre-thinning, the order depends on the count it aims at: ``keep_at`` answers a
+    fresh run given the same ``prethin_target``, at any count."""
+    X = _surface(3000)
+    opts = SimplifyOptions(refine=False, prethin=3)
+    res = simplify_points(X, ratio=0.2, options=opts)
+    assert 0 < res.stats["n_prethin_subset"] < 2000
+    fresh = simplify_points(X, ratio=ratio, options=opts, prethin_target=600)
+    assert fresh.stats["n_prethin_subset"] == res.stats["n_prethin_subset"]
+    np.testing.assert_array_equal(res.keep_at(ratio), fresh.keep)
+    # and a level pass (no count: the whole cloud) is the same sequence's prefix
+    level = float(np.quantile(res.order_importance, 0.9))
+    part = simplify_points(X, count=len(X), prethin_target=600,
+                           options=SimplifyOptions(refine=False, prethin=3,
+                                                   progressive_until=level))
+    np.testing.assert_array_equal(part.order, res.order[:part.order.size])
+    assert part.order_importance.max() > level
+
+
 def test_not_progressive_gives_the_same_kept_set(res_surface):
     X, res = res_surface
-    short = simplify_points(X, ratio=0.2, options=SimplifyOptions(progressive=False, refine=False))
+    short = simplify_points(X, ratio=0.2, options=SimplifyOptions(progressive=False, refine=False,
+                                                                   prethin=0))
     np.testing.assert_array_equal(short.keep, res.keep)
     np.testing.assert_array_equal(short.rank, res.rank)
     with pytest.raises(InputError, match="progressive"):
@@ -75,7 +97,7 @@ def test_progressive_until_is_a_prefix_that_covers_the_level(res_surface, quanti
     past_level = min(int(np.searchsorted(runmax, level, side="right")) + 1, res.order.size)
     for kw, to_target in (({"count": len(X)}, 0), ({"count": len(X) // 2}, len(X) // 2)):
         part = simplify_points(X, **kw, options=SimplifyOptions(progressive_until=level,
-                                                                     refine=False))
+                                                                     refine=False, prethin=0))
         k = part.order.size
         # the same sequence, cut right after the first removal above the level (the target
         # is reached whatever the level)

@@ -20,8 +20,9 @@ from .core import compile_cache
 def workloads():
     """Small runs that reach every kernel the package calls, with the argument types it calls
     them with: the core in both modes (and without the progressive order) on a sphere, on a
-    cube's faces with exact duplicates, and on a flat plate (the 2-D Delaunay); a tiled run in
-    both modes (halo, global cut, gap refinement)."""
+    cube's faces with exact duplicates, and on a flat plate (the 2-D Delaunay), at 10 % (under a
+    third: the pre-thinning runs too); a tiled run in both modes (halo, global cut, gap
+    refinement)."""
     from .core.simplify import simplify_points
     from .pipeline import run
 
@@ -34,12 +35,12 @@ def workloads():
     for X in (sphere, np.r_[cube, cube[:50]], plate):
         for mode in ("coverage", "paper"):
             for progressive in (True, False):
-                simplify_points(X, 0.3, options={"mode": mode, "progressive": progressive})
+                simplify_points(X, 0.1, options={"mode": mode, "progressive": progressive})
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "cloud.npy"
         np.save(src, np.r_[cube, rng.random((1500, 3)) * [1, 1, 0.01]])
         for mode in ("coverage", "paper"):
-            run(str(src), str(Path(tmp) / f"out_{mode}.npy"), ratio=0.3, tile_points=1000,
+            run(str(src), str(Path(tmp) / f"out_{mode}.npy"), ratio=0.1, tile_points=1000,
                 scheduler="synchronous", options={"mode": mode})
 
 

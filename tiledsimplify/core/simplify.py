@@ -18,6 +18,7 @@ from ..errors import BudgetWarning, InputError
 from . import adjacency
 from . import boundary as boundary_mod
 from . import edge_fit
+from . import prethin as prethin_mod
 from .heap import coordinate_hash
 from .importance import MEASURES, all_importance, coverage_weight
 from .local_mesh import MAX_DN, all_local_meshes
@@ -269,7 +270,8 @@ def neighbourhood_state(xyz, frozen=None, options=None):
     return st, deviation_u[inverse]
 
 
-def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, state=None):
+def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, state=None,
+                    prethin_target=None):
     """Simplify a point cloud, keeping (and flagging) every point on or near a sharp edge.
 
     Parameters
@@ -291,6 +293,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         From :func:`neighbourhood_state` on the same ``xyz`` and ``frozen`` (or restored with
         :meth:`Neighbourhoods.from_arrays`): skips steps 1-2. It is consumed (the removal
         updates it in place).
+    prethin_target : int, optional
+        The count the pre-thinning (``options.prethin``) multiplies instead of the target: a
+        tiled run passes its global target's share of the tile, so that every pass over a
+        tile thins it the same way whatever count that pass asks for.
 
     Returns
     -------
@@ -304,7 +310,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     -----
     Cost: one 3-D Delaunay triangulation (:mod:`.delaunay`; Qhull in mode "paper") to seed the
     Voronoi neighbours, then per removed point an exact local update of the neighbourhoods,
-    normals and importance of two rings of points around it (paper §3.3, Fig. 1).
+    normals and importance of two rings of points around it (paper §3.3, Fig. 1). In mode
+    "coverage" the smooth points are first thinned to ``options.prethin`` times the target
+    (:mod:`.prethin`), and the greedy runs on that subset with a triangulation of its own.
 
     References
     ----------
@@ -367,9 +375,6 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     if options.importance == "coverage":
         weight = coverage_weight(spacing, options.coverage) if spacing > 0 else 0.0
         stats["spacing"] = float(spacing)
-    imp_u = np.zeros(m)
-    all_importance(code, Xu, st.normals, boundary_u, st.dn, st.dn_cnt, weight, imp_u)
-    lap("importance")
 
     # 5. progressive removal: duplicate copies first (importance 0), then the greedy sequence
     boundary = boundary_u[inverse]
@@ -379,16 +384,48 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     removable_u = ~boundary_u & ~frozen[rep]
     n_remove = n - target
     to_target = max(0, n_remove - dup_order.size)
-    alive = removable_u.copy()
     tie = coordinate_hash(X[rep])
+    normals_u = st.initial_normals
+    # kept whatever the thinning: boundary, frozen, and what the gap refinement protects
+    fixed_u = boundary_u | frozen[rep] | protected(deviation_u, threshold)
+
+    # 4b. beyond the paper: thin the smooth points to a multiple of the target first
+    thinned = np.zeros(0, dtype=np.int64)
+    sub = None
+    if options.prethin_factor and (to_target > 0 or prethin_target is not None):
+        # the subset holds at least ``aim`` points; with ``prethin_target`` it is the same
+        # for every count asked (the passes over one tile agree)
+        aim = m - to_target if prethin_target is None else int(prethin_target)
+        sub = prethin_mod.subset(Xu, st.start, st.cnt, st.pool, fixed_u,
+                                 math.ceil(options.prethin_factor * aim),
+                                 spacing if spacing is not None else median_spacing(Xu), tie,
+                                 least=aim)
+    if sub is not None:
+        thinned = np.flatnonzero(~sub)
+        thinned = thinned[np.argsort(tie[thinned], kind="stable")]
+        keep_ids = np.flatnonzero(sub)
+        stats["n_prethin_subset"] = int(keep_ids.size)
+        st = state = None  # the whole cloud's lists (~0.4 KB a point) before the subset's
+        Xg = np.ascontiguousarray(Xu[keep_ids])
+        st = neighbourhoods(Xg, D, reach)
+        st.normals[:] = normals_u[keep_ids]  # the whole cloud's normals, as without thinning
+        boundary_g, tie_g = boundary_u[keep_ids], tie[keep_ids]
+        alive = removable_u[keep_ids]
+        to_target = max(0, to_target - thinned.size)
+    else:
+        Xg, boundary_g, tie_g, alive = Xu, boundary_u, tie, removable_u.copy()
+    lap("prethin")
+    imp_u = np.zeros(Xg.shape[0])
+    all_importance(code, Xg, st.normals, boundary_g, st.dn, st.dn_cnt, weight, imp_u)
+    lap("importance")
 
     def remove(n_steps, stop_above):
         order_k, at_k, st.pool = remove_points(
-            Xu, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
-            st.normals, st.stable, boundary_u, alive, imp_u, tie, code, weight,
+            Xg, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
+            st.normals, st.stable, boundary_g, alive, imp_u, tie_g, code, weight,
             GUARDS[options.guard], float(options.max_spacing or 0.0), n_steps, BOX_FACTOR * D,
             TOL_FACTOR * D, st.reach, options.update_normals, stop_above)
-        return order_k, at_k
+        return (order_k if sub is None else keep_ids[order_k]), at_k
 
     if not options.progressive:
         order_u, at_u = remove(to_target, np.inf)
@@ -400,9 +437,11 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         if not (at_u.size and at_u.max() > level):
             o2, a2 = remove(m, level)
             order_u, at_u = np.concatenate([order_u, o2]), np.concatenate([at_u, a2])
+    if thinned.size:  # first, with importance 0, as exact duplicates
+        order_u = np.concatenate([thinned, order_u])
+        at_u = np.concatenate([np.zeros(thinned.size), at_u])
     lap("removal")
 
-    normals_u = st.initial_normals
     del st, state  # the lists, meshes and normals (~0.4 KB a point) are not needed from here:
     # released before the refinement, whose searches would otherwise set the peak memory
     order = np.concatenate([dup_order, rep[order_u]])
@@ -415,7 +454,6 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     importance = np.full(n, np.nan)
     importance[order[:cut]] = order_importance[:cut]
     if options.refines and cut == n_remove and to_target > 0:
-        fixed_u = boundary_u | frozen[rep] | protected(deviation_u, threshold)
         keep_u, info = refine_coverage(Xu, keep[rep], fixed_u, tie=tie)
         rank, importance = _swap(keep, rank, importance, rep, keep_u, order, order_importance,
                                  cut)

@@ -1,0 +1,124 @@
+"""Pre-thinning (core/prethin.py): the disk sample against a naive twin, the subset's count,
+and a thinned run against the greedy run on the subset alone."""
+
+import naive
+import numpy as np
+import pytest
+
+from tiledsimplify import SimplifyOptions, simplify_points
+from tiledsimplify.core import prethin
+from tiledsimplify.core.simplify import median_spacing, neighbourhoods
+from tiledsimplify.core.voronoi import scale_of
+from tiledsimplify.errors import InputError
+
+
+def _plane(n, seed=0, noise=0.0):
+    rng = np.random.default_rng(seed)
+    X = np.c_[rng.random((n, 2)), noise * rng.standard_normal(n)]
+    return X - 0.5 * (X.min(0) + X.max(0))
+
+
+def _graph(X):
+    st = neighbourhoods(X, scale_of(X), reach=12 * median_spacing(X))
+    lists = [st.pool[st.start[i]:st.start[i] + st.cnt[i]].tolist() for i in range(len(X))]
+    return st, lists
+
+
+@pytest.mark.parametrize("r_spacings", [0.5, 1.5, 3.0])
+def test_disk_sample_matches_naive(r_spacings):
+    X = _plane(1500, seed=1)
+    st, lists = _graph(X)
+    rng = np.random.default_rng(2)
+    fixed = rng.random(len(X)) < 0.05
+    order = rng.permutation(len(X)).astype(np.int64)
+    r = r_spacings * median_spacing(X)
+    keep = np.zeros(len(X), dtype=bool)
+    k = prethin.disk_sample(X, st.start, st.cnt, st.pool, fixed, order, r, keep,
+                            np.empty(len(X), dtype=np.int64), np.empty(len(X), dtype=np.int64))
+    want = naive.disk_sample(X, lists, fixed, order, r)
+    assert np.array_equal(keep, want)
+    assert k == want.sum()
+    assert keep[fixed].all()
+    # a sample: no two kept free points within r of each other along one graph edge
+    free = keep & ~fixed
+    for p in np.flatnonzero(free):
+        for q in lists[p]:
+            if free[q]:
+                assert np.sum((X[q] - X[p]) ** 2) > r * r
+
+
+def test_subset_count_and_fixed():
+    X = _plane(6000, seed=3)
+    st, _ = _graph(X)
+    fixed = np.zeros(len(X), dtype=bool)
+    fixed[::97] = True
+    tie = np.random.default_rng(4).integers(0, 2**63, len(X)).astype(np.uint64)
+    for goal in (600, 1500, 3000):
+        mask = prethin.subset(X, st.start, st.cnt, st.pool, fixed, goal, median_spacing(X), tie)
+        assert mask is not None and mask[fixed].all()
+        assert abs(mask.sum() - goal) <= 0.1 * goal
+    # nothing worth thinning: the goal is most of the cloud, or the fixed points fill it
+    assert prethin.subset(X, st.start, st.cnt, st.pool, fixed, 5800, median_spacing(X),
+                          tie) is None
+    assert prethin.subset(X, st.start, st.cnt, st.pool, fixed, int(fixed.sum()),
+                          median_spacing(X), tie) is None
+
+
+def test_thinned_run_is_the_greedy_on_the_subset():
+    """The removal after thinning is exactly the greedy run on the subset (same spacing, same
+    centre and scale: the corners are frozen so the subset keeps the bounding box), the thinned
+    points first with importance 0. On a plane every normal is the same from the whole cloud
+    as from the subset (the thinned run reads the whole cloud's)."""
+    X = _plane(5000, seed=5)
+    lo, hi = X.min(0), X.max(0)
+    frozen = np.zeros(len(X), dtype=bool)
+    for d in range(3):
+        frozen[np.argmin(X[:, d])] = frozen[np.argmax(X[:, d])] = True
+    spacing = median_spacing(X)
+    opts = {"detect_boundary": False, "refine": False, "spacing": spacing, "progressive": False}
+    res = simplify_points(X, 0.1, frozen=frozen, options=SimplifyOptions(prethin=3, **opts))
+    k = len(X) - res.stats["n_prethin_subset"]
+    assert 0 < k < len(X)
+    thinned = res.order[:k]
+    assert np.all(res.order_importance[:k] == 0)
+    assert not frozen[thinned].any()
+    sub = np.setdiff1d(np.arange(len(X)), thinned)
+    assert np.allclose(X[sub].min(0), lo) and np.allclose(X[sub].max(0), hi)
+    alone = simplify_points(X[sub], count=int(res.keep.sum()), frozen=frozen[sub],
+                            options=SimplifyOptions(prethin=0, **opts))
+    assert np.array_equal(res.order[k:], sub[alone.order])
+    assert np.array_equal(res.order_importance[k:], alone.order_importance)
+    assert np.array_equal(res.keep[sub], alone.keep)
+    assert res.keep.sum() == 500
+
+
+def test_prethin_keeps_flags_and_count():
+    X = _plane(8000, seed=6, noise=0.001)
+    X[:, 2] += np.where(X[:, 0] > 0, X[:, 0], 0.0)  # a crease along x = 0
+    res = simplify_points(X, 0.1)
+    off = simplify_points(X, 0.1, options=SimplifyOptions(prethin=0))
+    assert "n_prethin_subset" in res.stats and "n_prethin_subset" not in off.stats
+    assert res.keep.sum() == off.keep.sum() == 800
+    assert np.array_equal(res.boundary, off.boundary)  # flags from the whole cloud
+    assert res.boundary.sum() > 0 and res.keep[res.boundary].all()
+    assert np.allclose(res.normals, off.normals)
+
+
+def test_prethin_off_when_the_target_is_most_of_the_cloud():
+    X = _plane(3000, seed=7)
+    a = simplify_points(X, 0.5)  # 3 x 0.5 > 0.9: nothing to thin
+    b = simplify_points(X, 0.5, options=SimplifyOptions(prethin=0))
+    assert "n_prethin_subset" not in a.stats
+    assert np.array_equal(a.order, b.order)
+
+
+@pytest.mark.parametrize("bad", [0.5, -1.0, float("nan")])
+def test_prethin_option_checked(bad):
+    with pytest.raises(InputError, match="prethin"):
+        SimplifyOptions(prethin=bad)
+
+
+def test_prethin_defaults_by_mode():
+    assert SimplifyOptions().prethin_factor == 3.0
+    assert SimplifyOptions(mode="paper").prethin_factor == 0.0
+    assert SimplifyOptions(mode="paper", prethin=2).prethin_factor == 2.0
