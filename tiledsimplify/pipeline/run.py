@@ -683,6 +683,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     opts = asdict(options)
     settings = {"tile_points": int(tile_points), "halo": halo, "options": opts,
                 "version": __version__}
+    if options.prethin_factor:  # the tiles' sequences then depend on the target: a resumed
+        settings["target"] = int(target)  # run must ask for the same
     fp = _fingerprint(source, settings)
 
     held = contextlib.ExitStack()  # closed at the end: the lock, the temporary store, a client
@@ -780,10 +782,12 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         # one tile alone sets the cut: its first n - target steps, so it runs to the target
         # (no floor's margin: on 100k scan points the tile 3.0-3.5 -> 2.9 s, the run 3.6-4.1 ->
         # 3.4 s, same output; floor 0.5 against ~1 alternating in one process, 2 pairs)
-        keep_fraction = (1.0 if ts.n_tiles == 1 else float(floor)) * target / n if n else 0.0
+        share = target / n if n else 0.0  # the pre-thinning's aim in every pass over a tile
+        keep_fraction = (1.0 if ts.n_tiles == 1 else float(floor)) * share
         if pending:
             _compute(_tile_tasks(simplify_tile, pending, ts.count, lambda i: (
-                str(store_path), i, opts, thr, ("keep", math.ceil(keep_fraction * ts.count(i))))),
+                str(store_path), i, opts, thr, ("keep", math.ceil(keep_fraction * ts.count(i))),
+                share)),
                 scheduler, workers, client, progress, "tiles", _tile_line,
                 points=sum(ts.count(i) for i in pending))
             log.info("simplified %d tiles in %.1f s", len(pending), time.perf_counter() - clock[0])
@@ -801,7 +805,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             log.info("the global cut reaches past the floor of %d tile(s): running them deeper",
                      len(need))
             _compute(_tile_tasks(simplify_tile, sorted(need), ts.count, lambda i: (
-                str(store_path), i, opts, thr, ("level", need[i]))),
+                str(store_path), i, opts, thr, ("level", need[i]), share)),
                 scheduler, workers, client, progress, "deeper", _tile_line,
                 points=sum(ts.count(i) for i in need))
         else:

@@ -8,6 +8,7 @@ large passes through the scheduler — and are plain module-level functions, so 
 processes and dask.distributed workers all run them the same way and get the same result.
 """
 
+import math
 import time
 import warnings
 
@@ -50,9 +51,11 @@ def _save_state(store, tile, state, n_points):
     store.write_state(tile, arrays, {"how": how, "n_points": int(n_points)})
 
 
-def _state(store, tile, xyz, frozen, options):
+def _state(store, tile, n_points):
     """The tile's neighbourhood state: restored from the store if the threshold pass saved
-    it there (mode "paper"), else built — and not saved.
+    it there (mode "paper"), else None — :func:`simplify_points` builds it (the same state,
+    without the paper's deviation measure that :func:`neighbourhood_state` adds, and no
+    reference held here while the pre-thinning builds its subset's) — and not saved.
 
     Saving it for a deeper pass cost more than it saved: the state is ~70 B a point on disk
     (zarr, compressed; ~120 B in memory), so every tile's state at once — they all live
@@ -65,9 +68,9 @@ def _state(store, tile, xyz, frozen, options):
     pass saves them and the later passes restore them.
     """
     saved = store.read_state(tile)
-    if saved is not None and saved[1].get("n_points") == len(xyz):
+    if saved is not None and saved[1].get("n_points") == n_points:
         return Neighbourhoods.from_arrays(saved[0], saved[1]["how"])
-    return neighbourhood_state(xyz, frozen, options)[0]
+    return None
 
 
 def deviation_histogram(store_path, tile, options):
@@ -117,7 +120,7 @@ def _halo_frozen(frozen, mode):
     return frozen if mode == "paper" else None
 
 
-def simplify_tile(store_path, tile, options, threshold, depth):
+def simplify_tile(store_path, tile, options, threshold, depth, share=None):
     """Simplify one tile (halo frozen in mode "paper", simplified with the core otherwise, see
     :func:`_halo_frozen`) down to ``depth``; write the core points' results; mark it done.
 
@@ -136,6 +139,11 @@ def simplify_tile(store_path, tile, options, threshold, depth):
         tile remains). ``("level", L)``: until the running maximum of importance at
         removal exceeds ``L`` (a deeper pass asked for by the global cut; ``inf`` runs to
         the end). Either way the recorded sequence is a prefix of the full one.
+    share : float or None
+        The global target's share of the input (target / points). The pre-thinning
+        (``prethin``) aims at this share of the tile in every pass, so the passes thin a
+        tile the same way and the deeper pass's sequence extends the first one's. None: the
+        pass's own count.
 
     Returns
     -------
@@ -174,7 +182,7 @@ def simplify_tile(store_path, tile, options, threshold, depth):
         tile_options = SimplifyOptions(**options)
         tile_frozen = _halo_frozen(frozen, tile_options.mode)
         soft = tile_frozen is None
-        state = _state(store, tile, xyz, tile_frozen, tile_options)
+        state = _state(store, tile, len(xyz))
         if kind == "keep":
             n_remove = max(n_core - int(value), 0)
             if soft:  # the halo thins with the core: remove the same share of the whole tile
@@ -190,8 +198,9 @@ def simplify_tile(store_path, tile, options, threshold, depth):
             raise InputError(f"depth must be ('keep', count) or ('level', value), got {depth!r}")
         opts["boundary_threshold"] = threshold
         opts["refine"] = False  # only the order is used here; the kept set is the global cut's
+        aim = None if share is None else math.ceil(share * len(xyz))
         res = simplify_points(xyz, count=count, frozen=tile_frozen,
-                              options=SimplifyOptions(**opts), state=state)
+                              options=SimplifyOptions(**opts), state=state, prethin_target=aim)
         n_all = int(res.order.size)
         if kind == "keep":
             exhausted = n_all < n_remove
