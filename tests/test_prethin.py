@@ -104,10 +104,10 @@ def test_prethin_keeps_flags_and_count():
     assert np.allclose(res.normals, off.normals)
 
 
-def test_prethin_off_when_the_target_is_most_of_the_cloud():
+def test_prethin_off_when_the_subset_would_be_most_of_the_cloud():
     X = _plane(3000, seed=7)
-    a = simplify_points(X, 0.5)  # 3 x 0.5 > 0.9: nothing to thin
-    b = simplify_points(X, 0.5, options=SimplifyOptions(prethin=0))
+    a = simplify_points(X, 0.2)  # 3 x 0.2 > prethin.MAX_SHARE: it would not pay
+    b = simplify_points(X, 0.2, options=SimplifyOptions(prethin=0))
     assert "n_prethin_subset" not in a.stats
     assert np.array_equal(a.order, b.order)
 
