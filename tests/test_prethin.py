@@ -122,3 +122,13 @@ def test_prethin_defaults_by_mode():
     assert SimplifyOptions().prethin_factor == 3.0
     assert SimplifyOptions(mode="paper").prethin_factor == 0.0
     assert SimplifyOptions(mode="paper", prethin=2).prethin_factor == 2.0
+
+
+def test_refinement_runs_when_the_count_is_above_the_subset():
+    """A count above the subset (a tiled pass aims the thinning lower) is still met exactly
+    and refined: the first of the thinned points stay, then the gaps are filled."""
+    X = _plane(4000, seed=8, noise=0.001)
+    res = simplify_points(X, 0.5, prethin_target=300)
+    assert res.stats["n_prethin_subset"] < 2000
+    assert res.keep.sum() == 2000
+    assert "refine_rounds" in res.stats

@@ -411,13 +411,14 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         st.normals[:] = normals_u[keep_ids]  # the whole cloud's normals, as without thinning
         boundary_g, tie_g = boundary_u[keep_ids], tie[keep_ids]
         alive = removable_u[keep_ids]
-        to_target = max(0, to_target - thinned.size)
     else:
         Xg, boundary_g, tie_g, alive = Xu, boundary_u, tie, removable_u.copy()
     lap("prethin")
     imp_u = np.zeros(Xg.shape[0])
     all_importance(code, Xg, st.normals, boundary_g, st.dn, st.dn_cnt, weight, imp_u)
     lap("importance")
+
+    greedy_target = max(0, to_target - thinned.size)  # the greedy's steps to the target
 
     def remove(n_steps, stop_above):
         order_k, at_k, st.pool = remove_points(
@@ -428,12 +429,12 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         return (order_k if sub is None else keep_ids[order_k]), at_k
 
     if not options.progressive:
-        order_u, at_u = remove(to_target, np.inf)
+        order_u, at_u = remove(greedy_target, np.inf)
     elif options.progressive_until is None:
         order_u, at_u = remove(m, np.inf)
     else:  # to the target, then on until the level is passed (the sequence is the same)
         level = float(options.progressive_until)
-        order_u, at_u = remove(to_target, np.inf)
+        order_u, at_u = remove(greedy_target, np.inf)
         if not (at_u.size and at_u.max() > level):
             o2, a2 = remove(m, level)
             order_u, at_u = np.concatenate([order_u, o2]), np.concatenate([at_u, a2])
