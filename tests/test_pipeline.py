@@ -265,6 +265,35 @@ def test_coverage_mode_floor_changes_the_time_never_the_output(tmp_path, monkeyp
     assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
 
 
+def test_prethinned_tiles_agree_between_passes(tmp_path, monkeypatch):
+    """At 10 % the tiles are pre-thinned (core/prethin.py) aiming at the global target's share
+    in every pass: tiles first run far (floor 0.05) or stopped at their share (floor 0.99, then
+    deeper passes) give the same bytes; a resume with another target is refused."""
+    from tiledsimplify.core import prethin
+    thinned = []
+    subset = prethin.subset
+    monkeypatch.setattr(prethin, "subset", lambda *a, **k: (
+        lambda m: (thinned.append(m is not None), m)[1])(subset(*a, **k)))
+    rng = np.random.default_rng(6)
+    xy = rng.random((6000, 2)) * [4.0, 1.0]
+    X = np.c_[xy, np.where(xy[:, 0] < 2.0, 0.0, 0.1 * np.sin(5 * xy[:, 0]))]
+    path = tmp_path / "in.npy"
+    np.save(path, X)
+    a = run(path, tmp_path / "a.npy", ratio=0.1, tile_points=1000, floor=0.99,
+            store=tmp_path / "store")
+    b = run(path, tmp_path / "b.npy", ratio=0.1, tile_points=1000, floor=0.05)
+    assert a.reached and b.reached and a.n_tiles >= 4 and a.n_deeper >= 1
+    assert any(thinned)
+    assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
+    off = run(path, tmp_path / "off.npy", ratio=0.1, tile_points=1000,
+              options={"prethin": 0})
+    assert off.reached and (tmp_path / "off.npy").read_bytes() != (
+        tmp_path / "a.npy").read_bytes()
+    with pytest.raises(ValueError, match="new --store"):
+        run(path, tmp_path / "x.npy", ratio=0.08, tile_points=1000, floor=0.99,
+            store=tmp_path / "store")
+
+
 def test_a_single_tile_runs_exactly_to_the_target(tmp_path):
     # one tile alone sets the global cut: it stops at the target, and no deeper pass is needed
     X = np.random.default_rng(8).random((3000, 3)) * [1.0, 1.0, 0.05]
