@@ -121,8 +121,10 @@ class SimplifyOptions:
         count by a Poisson-disk sample along the neighbourhood graph (boundary, frozen and
         strongly curved points all stay), and run the greedy on that subset
         (:mod:`tiledsimplify.core.prethin`): most removals at small targets are on smooth
-        surface, where the greedy does little more than thin evenly. 0: off (every removal
-        by the greedy, as the paper does). None: the mode's default (``"coverage"``: 3;
+        surface, where the greedy does little more than thin evenly. Only where the subset
+        would be at most half the cloud (:data:`~tiledsimplify.core.prethin.MAX_SHARE`; at 3,
+        targets under a sixth): above that it costs what it saves. 0: off (every removal by
+        the greedy, as the paper does). None: the mode's default (``"coverage"``: 3;
         ``"paper"``: 0). Counts above the subset's (:meth:`SimplifyResult.keep_at`) come from
         the sample, not the greedy.
     """
