@@ -5,7 +5,7 @@ import naive
 import numpy as np
 import pytest
 
-from tiledsimplify import SimplifyOptions, simplify_points
+from tiledsimplify import BudgetWarning, SimplifyOptions, simplify_points
 from tiledsimplify.core import prethin
 from tiledsimplify.core.simplify import median_spacing, neighbourhoods
 from tiledsimplify.core.voronoi import scale_of
@@ -116,6 +116,18 @@ def test_prethin_off_when_the_subset_would_be_most_of_the_cloud():
 def test_prethin_option_checked(bad):
     with pytest.raises(InputError, match="prethin"):
         SimplifyOptions(prethin=bad)
+
+
+def test_prethin_off_with_a_guard():
+    """The sample would remove points the guard vetoes (it spaces them wider than
+    ``max_spacing``): a guarded run is not thinned and keeps the guard's floor."""
+    X = _plane(3000, seed=9)
+    spacing = median_spacing(X)
+    with pytest.warns(BudgetWarning, match="vetoed by the max_spacing guard"):
+        res = simplify_points(X, 0.05, options=SimplifyOptions(guard="max_spacing",
+                                                               max_spacing=2 * spacing))
+    assert "n_prethin_subset" not in res.stats
+    assert SimplifyOptions(guard="max_spacing", max_spacing=1.0, prethin=3).prethin_factor == 0
 
 
 def test_prethin_defaults_by_mode():

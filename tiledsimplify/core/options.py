@@ -125,7 +125,8 @@ class SimplifyOptions:
         would be at most half the cloud (:data:`~tiledsimplify.core.prethin.MAX_SHARE`; at 3,
         targets under a sixth): above that it costs what it saves. 0: off (every removal by
         the greedy, as the paper does). None: the mode's default (``"coverage"``: 3;
-        ``"paper"``: 0). Counts above the subset's (:meth:`SimplifyResult.keep_at`) come from
+        ``"paper"``: 0). Off with a ``guard`` (the sample would not respect its veto). Counts
+        above the subset's (:meth:`SimplifyResult.keep_at`) come from
         the sample, not the greedy.
     """
 
@@ -215,7 +216,10 @@ class SimplifyOptions:
 
     @property
     def prethin_factor(self):
-        """The pre-thinning's multiple of the target: the option, else the mode's (0: off)."""
+        """The pre-thinning's multiple of the target: the option, else the mode's; 0 (off)
+        with a guard, whose veto the sample would not respect."""
+        if self.guard != "none":
+            return 0.0
         if self.prethin is not None:
             return float(self.prethin)
         return 0.0 if self.mode == "paper" else PRETHIN
