@@ -4,8 +4,8 @@ At a small target most of the greedy's removals happen on smooth surface, where 
 measure (:mod:`.importance`) orders points by little more than their spacing: it thins them
 evenly, as Poisson-disk sample elimination would. Each such removal still pays for an exact
 local update of the Voronoi neighbourhoods and local meshes (~20 µs, :mod:`.removal`). This
-step reaches a subset of about ``prethin`` times the target first, in one pass over the
-neighbourhood graph:
+step reaches a subset of about ``prethin`` times the target first, by passes over the
+neighbourhood graph (each ~0.1 s on a 300k-point tile):
 
 1. every *fixed* point (boundary, frozen, and those the gap refinement protects) is kept;
 2. the other points, in the order given (a coordinate hash: no direction preferred), are kept
