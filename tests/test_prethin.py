@@ -7,6 +7,7 @@ import pytest
 
 from tiledsimplify import BudgetWarning, SimplifyOptions, simplify_points
 from tiledsimplify.core import prethin
+from tiledsimplify.core.refine import protected
 from tiledsimplify.core.simplify import median_spacing, neighbourhoods
 from tiledsimplify.core.voronoi import scale_of
 from tiledsimplify.errors import InputError
@@ -64,6 +65,40 @@ def test_subset_count_and_fixed():
                           median_spacing(X), tie) is None
 
 
+def test_subset_draws_first_points_first():
+    """``first`` points come before the others in the sample's order, and are thinned like
+    them: the same subset as ordering by a key whose top bit puts them first."""
+    X = _plane(6000, seed=10)
+    st, _ = _graph(X)
+    rng = np.random.default_rng(11)
+    fixed = rng.random(len(X)) < 0.01
+    first = ~fixed & (rng.random(len(X)) < 0.3)
+    tie = rng.integers(0, 2**62, len(X)).astype(np.uint64)
+    spacing = median_spacing(X)
+    for goal in (900, 1500):
+        got = prethin.subset(X, st.start, st.cnt, st.pool, fixed, goal, spacing, tie,
+                             first=first)
+        key = tie | (np.uint64(1) << np.uint64(62)) * (~first).astype(np.uint64)
+        want = prethin.subset(X, st.start, st.cnt, st.pool, fixed, goal, spacing, key)
+        assert np.array_equal(got, want)
+        assert got[fixed].all() and 0 < got[first].sum() < first.sum()  # thinned too
+        plain = prethin.subset(X, st.start, st.cnt, st.pool, fixed, goal, spacing, tie)
+        assert got[first].mean() > plain[first].mean()  # but they win their disks
+
+
+def test_protected_points_are_thinned_boundary_points_are_not():
+    """The points the refinement protects may be thinned (a noisy scan has many); boundary
+    points never are."""
+    X = _plane(8000, seed=12, noise=0.004)
+    X[:, 2] += np.where(X[:, 0] > 0, X[:, 0], 0.0)  # a crease along x = 0
+    res = simplify_points(X, 0.1)
+    k = len(X) - res.stats["n_prethin_subset"]
+    guarded = protected(res.deviation, res.threshold) & ~res.boundary
+    assert res.boundary.sum() > 0 and guarded.sum() > 0
+    assert not res.boundary[res.order[:k]].any()
+    assert guarded[res.order[:k]].any()
+
+
 def test_thinned_run_is_the_greedy_on_the_subset():
     """The removal after thinning is exactly the greedy run on the subset (same spacing, same
     centre and scale: the corners are frozen so the subset keeps the bounding box), the thinned
@@ -106,8 +141,8 @@ def test_prethin_keeps_flags_and_count():
 
 def test_prethin_off_when_the_subset_would_be_most_of_the_cloud():
     X = _plane(3000, seed=7)
-    a = simplify_points(X, 0.2)  # 3 x 0.2 > prethin.MAX_SHARE: it would not pay
-    b = simplify_points(X, 0.2, options=SimplifyOptions(prethin=0))
+    a = simplify_points(X, 0.3)  # 2 x 0.3 > prethin.MAX_SHARE: it would not pay
+    b = simplify_points(X, 0.3, options=SimplifyOptions(prethin=0))
     assert "n_prethin_subset" not in a.stats
     assert np.array_equal(a.order, b.order)
 
@@ -131,7 +166,7 @@ def test_prethin_off_with_a_guard():
 
 
 def test_prethin_defaults_by_mode():
-    assert SimplifyOptions().prethin_factor == 3.0
+    assert SimplifyOptions().prethin_factor == 2.0
     assert SimplifyOptions(mode="paper").prethin_factor == 0.0
     assert SimplifyOptions(mode="paper", prethin=2).prethin_factor == 2.0
 

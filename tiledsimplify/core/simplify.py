@@ -386,8 +386,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     to_target = max(0, n_remove - dup_order.size)
     tie = coordinate_hash(X[rep])
     normals_u = st.initial_normals
-    # kept whatever the thinning: boundary, frozen, and what the gap refinement protects
-    fixed_u = boundary_u | frozen[rep] | protected(deviation_u, threshold)
+    never_u = boundary_u | frozen[rep]  # never removed
+    fixed_u = never_u | protected(deviation_u, threshold)  # never swapped out by the refinement
 
     # 4b. beyond the paper: thin the smooth points to a multiple of the target first
     thinned = np.zeros(0, dtype=np.int64)
@@ -396,10 +396,12 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         # the subset holds at least ``aim`` points; with ``prethin_target`` it is the same
         # for every count asked (the passes over one tile agree)
         aim = m - to_target if prethin_target is None else int(prethin_target)
-        sub = prethin_mod.subset(Xu, st.start, st.cnt, st.pool, fixed_u,
+        # boundary and frozen points all stay; the ones the refinement protects are drawn
+        # first but thinned like the rest (on noisy scans they are a quarter of the cloud)
+        sub = prethin_mod.subset(Xu, st.start, st.cnt, st.pool, never_u,
                                  math.ceil(options.prethin_factor * aim),
                                  spacing if spacing is not None else median_spacing(Xu), tie,
-                                 least=aim)
+                                 least=aim, first=fixed_u & ~never_u)
     if sub is not None:
         thinned = np.flatnonzero(~sub)
         thinned = thinned[np.argsort(tie[thinned], kind="stable")]

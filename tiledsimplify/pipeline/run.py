@@ -30,7 +30,7 @@ import numpy as np
 from dask.callbacks import Callback
 
 from .. import __version__, machine
-from ..core import SimplifyOptions, compile_cache, edge_fit
+from ..core import SimplifyOptions, compile_cache, edge_fit, prethin
 from ..core.result import resolve_target, short_message
 from ..errors import InputError, TiledSimplifyError
 from ..io import points_out
@@ -684,7 +684,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     settings = {"tile_points": int(tile_points), "halo": halo, "options": opts,
                 "version": __version__}
     if options.prethin_factor:  # the tiles' sequences then depend on the target: a resumed
-        settings["target"] = int(target)  # run must ask for the same
+        settings["target"] = int(target)  # run must ask for the same, thinned the same way
+        settings["prethin"] = {"factor": options.prethin_factor, "scheme": prethin.SCHEME}
     fp = _fingerprint(source, settings)
 
     held = contextlib.ExitStack()  # closed at the end: the lock, the temporary store, a client
