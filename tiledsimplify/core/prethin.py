@@ -12,10 +12,10 @@ neighbourhood graph (each ~0.1 s on a 300k-point tile):
    unless a kept point lies within the radius ``r`` along the neighbourhood graph — a
    Poisson-disk sample of radius ``r`` around the fixed points. The points the gap refinement
    protects (:func:`.refine.protected`: strongly non-planar neighbourhoods) come first in
-   that order, so they win their disks, but are thinned like the rest: on noisy scans they
-   are a fifth to a quarter of the cloud, and keeping them all (as until 2026-12-04) filled
-   most of a subset of 2x the target with them — a subset the greedy and the refinement
-   could not space out (the tray scan's Hausdorff distance 93 -> 113);
+   that order, so they win their disks, but are thinned like the rest: on a noisy scan they
+   can be a large share of the cloud (28 % of the tray scan at noise 0.1), and keeping them
+   all (as until 2026-12-04) filled 88 % of its subset of 2x the target with them — a
+   subset the greedy and the refinement could not space out (Hausdorff 93 -> 113);
 3. ``r`` is found by a few secant steps on ``log(count)`` against ``log(r)``, from the guess
    that the count goes with ``1 / r²`` as on an evenly sampled surface (scan lines, ~4x
    closer along than across, are not: 3 passes instead of 6 on a scan tile, within 10 %).
@@ -36,8 +36,9 @@ from ._jit import jit
 #: the largest subset, as a share of the cloud, worth thinning to: the subset's own
 #: neighbourhoods cost ~10 µs a point and the sample ~2 µs a point of the cloud, against ~20 µs
 #: for each removal saved, so the pre-thinning pays below ~0.6 of the cloud. Measured at 0.6
-#: (ratio 0.2, the default 3x; 2026-12-04, one pair each, 2 workers, 150k-point tiles): the 1M
-#: scan of ``benchmarks/pipeline_speed.py`` 20.6 -> 19.6 s, its 10M scan 208 -> 221 s
+#: (ratio 0.2 at 3x; 2026-12-04, one pair each, 2 workers, 150k-point tiles): the 1M scan of
+#: ``benchmarks/pipeline_speed.py`` 20.6 -> 19.6 s, its 10M scan 208 -> 221 s. At the default
+#: 2x a 20 % target is a subset of 0.4, where it pays (docs/measurements.md)
 MAX_SHARE = 0.5
 #: names the rule above in a tiled run's store fingerprint (a store thinned by another rule is
 #: not resumed)

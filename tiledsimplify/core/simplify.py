@@ -397,7 +397,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         # for every count asked (the passes over one tile agree)
         aim = m - to_target if prethin_target is None else int(prethin_target)
         # boundary and frozen points all stay; the ones the refinement protects are drawn
-        # first but thinned like the rest (on noisy scans they are a quarter of the cloud)
+        # first but thinned like the rest (28 % of the noisy tray scan, see prethin)
         sub = prethin_mod.subset(Xu, st.start, st.cnt, st.pool, never_u,
                                  math.ceil(options.prethin_factor * aim),
                                  spacing if spacing is not None else median_spacing(Xu), tie,
