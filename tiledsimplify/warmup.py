@@ -21,7 +21,7 @@ def workloads():
     """Small runs that reach every kernel the package calls, with the argument types it calls
     them with: the core in both modes (and without the progressive order) on a sphere, on a
     cube's faces with exact duplicates, and on a flat plate (the 2-D Delaunay), at 10 % (under a
-    third: the pre-thinning runs too); a tiled run in both modes (halo, global cut, gap
+    quarter: the pre-thinning runs too); a tiled run in both modes (halo, global cut, gap
     refinement)."""
     from .core.simplify import simplify_points
     from .pipeline import run

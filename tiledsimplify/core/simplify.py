@@ -381,12 +381,11 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     is_rep = np.zeros(n, dtype=bool)
     is_rep[rep] = True
     dup_order = np.flatnonzero(~is_rep & ~frozen & ~boundary)
-    removable_u = ~boundary_u & ~frozen[rep]
+    never_u = boundary_u | frozen[rep]  # never removed
     n_remove = n - target
     to_target = max(0, n_remove - dup_order.size)
     tie = coordinate_hash(X[rep])
     normals_u = st.initial_normals
-    never_u = boundary_u | frozen[rep]  # never removed
     fixed_u = never_u | protected(deviation_u, threshold)  # never swapped out by the refinement
 
     # 4b. beyond the paper: thin the smooth points to a multiple of the target first
@@ -412,9 +411,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         st = neighbourhoods(Xg, D, reach)
         st.normals[:] = normals_u[keep_ids]  # the whole cloud's normals, as without thinning
         boundary_g, tie_g = boundary_u[keep_ids], tie[keep_ids]
-        alive = removable_u[keep_ids]
+        alive = ~never_u[keep_ids]
     else:
-        Xg, boundary_g, tie_g, alive = Xu, boundary_u, tie, removable_u.copy()
+        Xg, boundary_g, tie_g, alive = Xu, boundary_u, tie, ~never_u
     lap("prethin")
     imp_u = np.zeros(Xg.shape[0])
     all_importance(code, Xg, st.normals, boundary_g, st.dn, st.dn_cnt, weight, imp_u)
