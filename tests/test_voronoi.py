@@ -293,3 +293,20 @@ def test_from_edges_sorted_fast_path_equals_general_path():
         general = adjacency.from_edges(n, E[::-1, ::-1], slack=slack)  # unsorted: lexsort path
         for x, y in zip(fast, general):
             assert x.dtype == y.dtype and np.array_equal(x, y)
+
+
+@pytest.mark.parametrize("cell", [1.0, 1.7])
+def test_far_from_points_matches_a_kd_tree(cell):
+    """The guards' grid check keeps exactly the queries with no point closer than the radius
+    (cells of side ``cell`` x the radius), as a kd-tree query says."""
+    rng = np.random.default_rng(11)
+    X = rng.random((3000, 3)) * [1.0, 1.0, 0.05]  # a slab: most of the box empty
+    r = 0.04
+    G = rng.uniform(-0.2, 1.2, (4000, 3))
+    h = cell * r * (1.0 + 1e-6)
+    lo = G.min(axis=0) - h
+    dims = np.ceil((G.max(axis=0) - lo) / h).astype(np.int64) + 2
+    far = voronoi._far_from_points(X, G, lo, h, dims, r * r)
+    d = cKDTree(X).query(G)[0]
+    assert 0 < far.sum() < len(G)
+    np.testing.assert_array_equal(far, d >= r)
