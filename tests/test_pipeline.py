@@ -396,6 +396,24 @@ def test_tiles_start_largest_first_and_refine_after_their_earlier_neighbours(
                 assert at[j] < at[i], (i, j, refined)
 
 
+
+def test_cut_hausdorff_is_the_largest_core_gap_under_the_cut(bunny, tmp_path):
+    # each tile's gap under the global cut, against brute force over its core and halo
+    from tiledsimplify.pipeline import tile_refine
+    X, path = bunny
+    store = tmp_path / "store"
+    assert run(path, tmp_path / "out.npy", ratio=0.2, tile_points=1500, store=store).refined
+    ts = TileStore.open(store)
+    cut, _ = tile_refine._cut(ts)
+    gaps = []
+    for i in range(ts.n_tiles):
+        xyz, keep, n_core = tile_refine._view(ts, i, cut)
+        d = np.linalg.norm(xyz[:n_core, None, :] - xyz[keep][None, :, :], axis=2).min(axis=1)
+        got = tile_refine.cut_hausdorff(str(store), i)["hausdorff"]
+        assert got == pytest.approx(d.max(), rel=1e-12)
+        gaps.append(got)
+    assert max(gaps) == ts.run_attrs["cut_hausdorff"] > 0
+
 def test_resume_finishes_the_remaining_tiles(bunny, tmp_path, caplog):
     X, path = bunny
     store = tmp_path / "store"

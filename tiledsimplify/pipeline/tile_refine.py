@@ -114,8 +114,9 @@ def cut_hausdorff(store_path, tile):
     cut, _ = _cut(store)
     xyz, keep, n_core = _view(store, tile, cut)
     h = 0.0
-    if n_core:
-        h = float(cKDTree(xyz[keep]).query(xyz[:n_core])[0].max()) if keep.any() else np.inf
+    gone = xyz[:n_core][~keep[:n_core]]  # a kept core point is 0 from the kept points
+    if gone.size:
+        h = float(cKDTree(xyz[keep]).query(gone)[0].max()) if keep.any() else np.inf
     return {"tile": int(tile), "hausdorff": h, "seconds": time.perf_counter() - t0}
 
 
