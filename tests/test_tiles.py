@@ -234,6 +234,9 @@ def test_every_point_in_exactly_one_core(sp_data, sp_store):
     xyz, _ = sp_data
     check_partition(sp_store, xyz)
     assert sp_store.tile_counts.max() <= 20_000
+    for t in range(sp_store.n_tiles):  # the points alone, as the tile passes read them
+        assert np.array_equal(sp_store.core_xyz(t), sp_store.core(t)[0])
+        assert np.array_equal(sp_store.core_index(t), sp_store.core(t)[1])
 
 
 @pytest.mark.parametrize("tile_points,chunk", [(3_000, 7_001), (25_000, 100_000), (200_000, 999)])

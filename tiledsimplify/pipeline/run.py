@@ -1000,7 +1000,7 @@ def _tile_piece(store_path, tile, prefix, refined, layout, is_las, start=None, e
             "cut says (a bug: the output's LAZ chunks would be misplaced)")
     if not keep.any():
         return None
-    xyz = ts.core(tile)[0][keep]
+    xyz = ts.core_xyz(tile)[keep]
     boundary = boundary[keep]
     k = len(xyz)
     if is_las:

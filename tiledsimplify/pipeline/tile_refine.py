@@ -71,7 +71,7 @@ def _view(store, tile, cut, refined=()):
     """Core and halo of a tile with the kept flags it sees: ``(xyz, keep, n_core)``. Halo
     points of the tiles in ``refined`` (earlier phases) as they refined them, the rest as the
     cut keeps them."""
-    core_xyz, _ = store.core(tile)
+    core_xyz = store.core_xyz(tile)
     halo_xyz, _, owner, row = store.tile_halo(tile)
     keep = np.zeros(len(core_xyz) + len(halo_xyz), dtype=bool)
     keep[:len(core_xyz)] = _kept(store, tile, cut)

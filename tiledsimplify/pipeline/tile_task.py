@@ -38,7 +38,7 @@ BINS = np.concatenate([[0.0], np.geomspace(1e-7, 4.0, 4095)])
 
 
 def _tile_cloud(store, tile):
-    core_xyz = store.core(tile)[0]
+    core_xyz = store.core_xyz(tile)
     halo_xyz = store.tile_halo(tile)[0]
     xyz = np.concatenate([core_xyz, halo_xyz])
     frozen = np.zeros(len(xyz), dtype=bool)

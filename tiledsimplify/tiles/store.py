@@ -1034,6 +1034,11 @@ class TileStore:
         t = self._tile(tile)
         return self._read(t, "xyz"), self._read(t, "index")
 
+    def core_xyz(self, tile: int) -> np.ndarray:
+        """A tile's core points (:meth:`core` without the indices, which a tile's passes do
+        not need: one array fewer to read and decompress per pass)."""
+        return self._read(self._tile(tile), "xyz")
+
     def core_index(self, tile: int) -> np.ndarray:
         """A tile's core points' global input indices (:meth:`core` without the points)."""
         return self._read(self._tile(tile), "index")
