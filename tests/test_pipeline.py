@@ -400,7 +400,7 @@ def test_tiles_start_largest_first_and_refine_after_their_earlier_neighbours(
 def test_cut_hausdorff_is_the_largest_core_gap_under_the_cut(bunny, tmp_path):
     # each tile's gap under the global cut, against brute force over its core and halo
     from tiledsimplify.pipeline import tile_refine
-    X, path = bunny
+    _, path = bunny
     store = tmp_path / "store"
     assert run(path, tmp_path / "out.npy", ratio=0.2, tile_points=1500, store=store).refined
     ts = TileStore.open(store)
