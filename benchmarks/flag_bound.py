@@ -31,8 +31,8 @@ def grown_from(X, start, total):
     if not keep.any():
         keep[0] = True
     d = cKDTree(X[keep]).query(X)[0]
-    while keep.sum() < total:
-        i = int(np.argmax(d))
+    for _ in range(total - int(keep.sum())):
+        i = int(np.argmax(d))  # d is 0 at every kept point: a new one each time
         keep[i] = True
         e = X - X[i]
         d = np.minimum(d, np.sqrt(np.einsum("ij,ij->i", e, e)))
@@ -40,7 +40,7 @@ def grown_from(X, start, total):
 
 
 def main(argv=None):
-    from peers import _fps
+    from peers import PEERS
     from quality import PARTS, load_case
 
     from tiledsimplify import metrics, simplify_points
@@ -50,6 +50,7 @@ def main(argv=None):
     p.add_argument("--cases", default=",".join(["bunny", "fandisk", *PARTS]),
                    help="comma-separated case names of benchmarks/quality.py")
     args = p.parse_args(argv)
+    fps = PEERS["farthest point (fpsample)"][0]
     print("| case | kept | flagged | protected, kept | Hausdorff: ours | grown from our flags | "
           "grown from flags + protected | farthest point (fpsample) | ours / grown from flags | "
           "ours / fpsample |")
@@ -63,7 +64,7 @@ def main(argv=None):
         h = {"ours": metrics.hausdorff_distance(X, res.keep),
              "grown": metrics.hausdorff_distance(X, grown_from(X, res.boundary, target)),
              "fixed": metrics.hausdorff_distance(X, grown_from(X, fixed, target)),
-             "fps": metrics.hausdorff_distance(X, _fps(X, target).keep)}
+             "fps": metrics.hausdorff_distance(X, fps(X, target).keep)}
         h = {k: 1e4 * v for k, v in h.items()}  # 1e-4 of the bounding-box diagonal
         print(f"| {name} | {target:,} | {int(res.boundary.sum()):,} | "
               f"{int((fixed & ~res.boundary).sum()):,} | {h['ours']:.0f} | {h['grown']:.0f} | "

@@ -396,7 +396,6 @@ def test_tiles_start_largest_first_and_refine_after_their_earlier_neighbours(
                 assert at[j] < at[i], (i, j, refined)
 
 
-
 def test_cut_hausdorff_is_the_largest_core_gap_under_the_cut(bunny, tmp_path):
     # each tile's gap under the global cut, against brute force over its core and halo
     from tiledsimplify.pipeline import tile_refine
@@ -413,6 +412,7 @@ def test_cut_hausdorff_is_the_largest_core_gap_under_the_cut(bunny, tmp_path):
         assert got == pytest.approx(d.max(), rel=1e-12)
         gaps.append(got)
     assert max(gaps) == ts.run_attrs["cut_hausdorff"] > 0
+
 
 def test_resume_finishes_the_remaining_tiles(bunny, tmp_path, caplog):
     X, path = bunny

@@ -306,7 +306,7 @@ def test_far_from_points_matches_a_kd_tree(cell):
     h = cell * r * (1.0 + 1e-6)
     lo = G.min(axis=0) - h
     dims = np.ceil((G.max(axis=0) - lo) / h).astype(np.int64) + 2
-    far = voronoi._far_from_points(X, G, lo, h, dims, r * r)
+    far = voronoi.far_from_points(X, G, lo, h, dims, r * r)
     d = cKDTree(X).query(G)[0]
     assert 0 < far.sum() < len(G)
     np.testing.assert_array_equal(far, d >= r)
