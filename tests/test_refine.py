@@ -6,7 +6,9 @@ from scipy.spatial import cKDTree
 
 from tiledsimplify import SimplifyOptions, simplify_points, synthetic
 from tiledsimplify.core.heap import coordinate_hash
-from tiledsimplify.core.refine import PROTECT, protected, refine_coverage, thin_below
+from tiledsimplify.core import cell_grid
+from tiledsimplify.core.refine import (PROTECT, _fill, protected, refine_coverage,
+                                         thin_below)
 from tiledsimplify.io import read_mesh
 
 import naive
@@ -66,6 +68,37 @@ def test_thin_below_on_short_lists_matches_recomputing_every_step(seed):
             expect, expect_dist = naive.thin_lists(nbr, nd, removable, tie, level, 40)
             assert gone.tolist() == expect.tolist()
             np.testing.assert_array_equal(dist, expect_dist)
+
+
+def _fill_naive(X, dist, level):
+    """Farthest first by ``np.argmax`` over every point, each addition lowering the rest."""
+    dist, added = dist.copy(), []
+    while dist.max() > level:
+        x = int(np.argmax(dist))
+        dist = np.minimum(dist, np.linalg.norm(X - X[x], axis=1))
+        dist[x] = 0.0
+        added.append(x)
+    return np.array(added, dtype=np.int64), dist
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fill_adds_the_farthest_point_first_as_a_full_scan_does(seed):
+    rng = np.random.default_rng(seed)
+    X = _wavy(3000, seed)
+    X[::7] = np.round(X[::7], 1)  # equal distances: the first of equals must come first
+    keep = rng.random(len(X)) < 0.05
+    dist = cKDTree(X[keep]).query(X)[0]
+    H = dist.max()
+    grid = cell_grid.CellGrid(X, H * (1.0 + 4.0 * cell_grid.COVER))
+    sizes = []
+    for level in (0.9 * H, 0.6 * H, 0.3 * H):
+        want, want_dist = _fill_naive(X, dist, level)
+        got_dist = dist.copy()
+        got = _fill(X, grid, lambda: cKDTree(X), got_dist, level)
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_allclose(got_dist, want_dist, rtol=0, atol=1e-12)
+        sizes.append(got.size)
+    assert sizes[0] >= 1 and sizes[-1] > 50
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])

@@ -184,38 +184,49 @@ def _fill_cells(X, dist, level, cell_of, near_start, near, pt_start, pt, pt_xyz,
     largest, so in the cells around it while that is below ``reach``). Returns the added
     points and ``-1``, or stops before a point whose distance reaches beyond the cells and
     returns it instead of ``-1``.
+
+    The points above ``level`` wait in a heap keyed by their distance (ties by id, so the
+    first of equals comes first, as ``np.argmax``); a distance that drops is updated in place.
+    A scan of them all for the largest before each addition made this quadratic: 0.75 s of a
+    1M-point core run against 0.007 s at 100k points.
     """
     far = np.nonzero(dist > level)[0]  # only these can be added: distances only drop
-    out = np.empty(far.size, dtype=np.int64)
+    m = far.size
+    out = np.empty(m, dtype=np.int64)
+    slot = np.full(dist.size, -1, dtype=np.int64)  # a point's index in ``far``
+    key = np.empty(m)
+    for t in range(m):
+        slot[far[t]] = t
+        key[t] = -dist[far[t]]
+    tie = np.zeros(m, dtype=np.uint64)
+    hp, pos = heap.new(m)
+    size = heap.build(hp, pos, key, tie, np.arange(m))
     done = 0
-    while True:
-        x = -1
-        r = level
-        live = 0
-        for t in range(far.size):  # the first farthest, as np.argmax; drop those now within
-            y = far[t]
-            if dist[y] > level:
-                far[live] = y
-                live += 1
-                if dist[y] > r:
-                    r = dist[y]
-                    x = y
-        far = far[:live]
-        if x < 0:
-            return out[:done], -1
+    while size > 0:
+        x = far[heap.top(hp)]
+        r = dist[x]
+        if not r > level:
+            break
         if not r < reach:
             return out[:done], x
+        heap.pop(hp, pos, key, tie, size)
+        size -= 1
+        dist[x] = 0.0
         q = X[x]
         cell = cell_of[x]
         for u in range(near_start[cell], near_start[cell + 1]):
             v = near[u]
             for i in range(pt_start[v], pt_start[v + 1]):
+                y = pt[i]
                 d = np.sqrt(cell_grid.sq_dist(pt_xyz, i, q))
-                if d < dist[pt[i]]:
-                    dist[pt[i]] = d
-        dist[x] = 0.0
+                if d < dist[y]:
+                    dist[y] = d
+                    t = slot[y]
+                    if t >= 0 and pos[t] >= 0:
+                        heap.update(hp, pos, key, tie, t, -d, size)
         out[done] = x
         done += 1
+    return out[:done], -1
 
 
 def _fill(X, grid, tree_x, dist, level):
