@@ -199,3 +199,22 @@ def test_refine_coverage_on_small_odd_clouds_equals_brute_force(seed):
         got = refine_coverage(X, keep, fixed, **kw)
         expect = naive.refine_coverage(X, keep, fixed, **kw)
         assert np.array_equal(got[0], expect[0]) and got[1] == expect[1]
+
+
+def _nearest_clouds():
+    yield from _clouds()
+    rng = np.random.default_rng(1)
+    # a dense clump and sparse far points: the sample's guess is far too small for the latter
+    yield "clumped", np.unique(np.r_[rng.random((3000, 3)) * 1e-3, rng.random((200, 3)) * 50],
+                               axis=0)
+    yield "line", np.c_[np.sort(rng.random(500)), np.zeros(500), np.zeros(500)] + [5e5, 4e6, 1]
+    yield "two", np.array([[0.0, 0.0, 0.0], [3.0, 4.0, 0.0]])
+
+
+@pytest.mark.parametrize("name,X", list(_nearest_clouds()),
+                         ids=lambda v: v if isinstance(v, str) else "")
+def test_nearest_other_equals_the_kd_tree_bit_for_bit(name, X):
+    X = np.unique(X, axis=0)
+    want = cKDTree(X).query(X, k=2)[0][:, 1]
+    for sample in (16, 4096):
+        np.testing.assert_array_equal(cell_grid.nearest_other(X, sample=sample), want)

@@ -12,11 +12,11 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..errors import BudgetWarning, InputError
 from . import adjacency
 from . import boundary as boundary_mod
+from . import cell_grid
 from . import edge_fit
 from . import prethin as prethin_mod
 from .heap import coordinate_hash
@@ -140,7 +140,7 @@ def median_spacing(Xu):
     """Median distance from a point to its nearest neighbour (0 for fewer than 2 points)."""
     if Xu.shape[0] < 2:
         return 0.0
-    return float(np.median(cKDTree(Xu).query(Xu, k=2)[0][:, 1]))
+    return float(np.median(cell_grid.nearest_other(Xu)))
 
 
 def _spacing(Xu, options):
