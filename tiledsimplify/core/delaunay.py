@@ -403,6 +403,25 @@ def _grow_all(rec, alive, flag, free):
     return r2, a2, g2, f2
 
 
+@jit
+def _real_tets(tets, n):
+    """The rows of ``tets`` whose four corners are all below ``n`` (no super-tetrahedron
+    corner), in order: ``tets[(tets < n).all(axis=1)]`` in two passes, not numpy's four
+    (0.2-0.4 s of a 1M-point core run, ~6.5M tetrahedra)."""
+    keep = 0
+    for t in range(tets.shape[0]):
+        if tets[t, 0] < n and tets[t, 1] < n and tets[t, 2] < n and tets[t, 3] < n:
+            keep += 1
+    out = np.empty((keep, 4), dtype=tets.dtype)
+    k = 0
+    for t in range(tets.shape[0]):
+        if tets[t, 0] < n and tets[t, 1] < n and tets[t, 2] < n and tets[t, 3] < n:
+            for j in range(4):
+                out[k, j] = tets[t, j]
+            k += 1
+    return out
+
+
 def delaunay_tets(P, seed=0):
     """Tetrahedra of the Delaunay triangulation of ``P`` (n, 3) as int32 point ids, or
     ``None`` if the construction failed (the caller then uses Qhull).
@@ -423,4 +442,4 @@ def delaunay_tets(P, seed=0):
     tets, ok = _build(X, brio_order(P, seed).astype(np.int64), n, 8 * n + 64, 256)
     if not ok:
         return None
-    return tets[(tets < n).all(axis=1)]  # int32, as built: half the memory of int64
+    return _real_tets(tets, n)  # int32, as built: half the memory of int64
