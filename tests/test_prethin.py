@@ -65,24 +65,31 @@ def test_subset_count_and_fixed():
                           median_spacing(X), tie) is None
 
 
-def test_subset_draws_first_points_first():
+@pytest.mark.parametrize("block", [500, 10**9])
+def test_subset_draws_first_points_first_block_by_block(block, monkeypatch):
     """``first`` points come before the others in the sample's order, and are thinned like
-    them: the same subset as ordering by a key whose top bit puts them first."""
+    them; each group goes block by block (``BLOCK`` consecutive points), in the order of
+    ``tie`` within a block: the same subset as one block ordered by a key whose top bit puts
+    the first points first and whose next bits are the block."""
     X = _plane(6000, seed=10)
     st, _ = _graph(X)
     rng = np.random.default_rng(11)
     fixed = rng.random(len(X)) < 0.01
     first = ~fixed & (rng.random(len(X)) < 0.3)
-    tie = rng.integers(0, 2**62, len(X)).astype(np.uint64)
+    tie = rng.integers(0, 2**57, len(X)).astype(np.uint64)
+    blocks = (np.arange(len(X)) // block).astype(np.uint64)  # at most 12: 5 bits
+    key = (tie | (blocks << np.uint64(57))
+           | (np.uint64(1) << np.uint64(62)) * (~first).astype(np.uint64))
     spacing = median_spacing(X)
     for goal in (900, 1500):
+        monkeypatch.setattr(prethin, "BLOCK", block)
         got = prethin.subset(X, st.start, st.cnt, st.pool, fixed, goal, spacing, tie,
                              first=first)
-        key = tie | (np.uint64(1) << np.uint64(62)) * (~first).astype(np.uint64)
+        plain = prethin.subset(X, st.start, st.cnt, st.pool, fixed, goal, spacing, tie)
+        monkeypatch.setattr(prethin, "BLOCK", 10**9)
         want = prethin.subset(X, st.start, st.cnt, st.pool, fixed, goal, spacing, key)
         assert np.array_equal(got, want)
         assert got[fixed].all() and 0 < got[first].sum() < first.sum()  # thinned too
-        plain = prethin.subset(X, st.start, st.cnt, st.pool, fixed, goal, spacing, tie)
         assert got[first].mean() > plain[first].mean()  # but they win their disks
 
 
