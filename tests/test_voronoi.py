@@ -278,6 +278,9 @@ def test_simplex_edges_equal_unique_of_all_simplex_edges(shape, dtype):
                             for j in range(i + 1, d)])
     assert np.array_equal(voronoi._simplex_edges(S), np.unique(pairs, axis=0))
     assert voronoi._simplex_edges(np.empty((0, 4), np.int64)).shape == (0, 2)
+    want = np.unique(pairs, axis=0)
+    for n in (shape[0] - 1, shape[0] // 2):  # the points from n on are guards: left out
+        assert np.array_equal(voronoi._simplex_edges(S, n), want[want[:, 1] < n])
 
 
 def test_from_edges_sorted_fast_path_equals_general_path():

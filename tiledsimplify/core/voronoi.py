@@ -348,7 +348,8 @@ def filter_candidates(X, start, cnt, pool, half, tol, reach):
 
 @jit
 def _unique_edges(simplices, n):
-    """Unique undirected edges ``(i, j)``, ``i < j``, of ``simplices``, sorted by ``(i, j)``.
+    """Unique undirected edges ``(i, j)``, ``i < j < n``, of ``simplices``, sorted by
+    ``(i, j)`` (edges with an end at ``n`` or above — the guard points — are left out).
 
     Buckets each edge by its smaller end, then deduplicates and sorts each (short) bucket in
     place: one linear pass instead of ``np.unique`` on all ``d(d-1)/2`` edges of every
@@ -361,7 +362,8 @@ def _unique_edges(simplices, n):
     for t in range(t_n):
         for i in range(d):
             for j in range(i + 1, d):
-                count[min(simplices[t, i], simplices[t, j]) + 1] += 1
+                if max(simplices[t, i], simplices[t, j]) < n:
+                    count[min(simplices[t, i], simplices[t, j]) + 1] += 1
     for i in range(n):
         count[i + 1] += count[i]
     fill = count[:-1].copy()
@@ -372,6 +374,8 @@ def _unique_edges(simplices, n):
                 u, v = simplices[t, i], simplices[t, j]
                 if u > v:
                     u, v = v, u
+                if v >= n:
+                    continue
                 other[fill[u]] = v
                 fill[u] += 1
     mark = np.full(n, -1, dtype=np.int64)
@@ -402,15 +406,17 @@ def _unique_edges(simplices, n):
     return out
 
 
-def _simplex_edges(simplices):
-    """Unique undirected edges (i < j) of a simplicial complex, sorted by (i, j)."""
+def _simplex_edges(simplices, n=None):
+    """Unique undirected edges (i < j) of a simplicial complex, sorted by (i, j); only those
+    between points below ``n`` if given (the real points, not the guards: a filter of the
+    ~7M edges of a 1M-point cloud afterwards took 0.1-0.2 s)."""
     simplices = np.asarray(simplices)
     if simplices.dtype not in (np.int32, np.int64):
         simplices = simplices.astype(np.int64)
     simplices = np.ascontiguousarray(simplices)
     if not simplices.size:
         return np.empty((0, 2), np.int64)
-    return _unique_edges(simplices, int(simplices.max()) + 1)
+    return _unique_edges(simplices, int(simplices.max()) + 1 if n is None else int(n))
 
 
 def _all_pairs(n):
@@ -547,8 +553,7 @@ def candidate_edges(X, reach=math.inf):
             except QhullError:
                 simplices = Delaunay(C, qhull_options="QJ").simplices
                 how = "qhull, joggled" + fallback
-    edges = _simplex_edges(simplices)
-    return edges[edges[:, 1] < n], how
+    return _simplex_edges(simplices, n), how
 
 
 def scale_of(X):
