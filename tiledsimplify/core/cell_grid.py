@@ -470,9 +470,7 @@ def _nearest_other(pt, cell_of, near_start, near, pt_start, pt_xyz, reach2, out)
             v = near[u]
             for j in range(pt_start[v], pt_start[v + 1]):
                 if j != t:
-                    d2 = sq_dist(pt_xyz, j, q)
-                    if d2 < best:
-                        best = d2
+                    best = min(best, sq_dist(pt_xyz, j, q))
         out[i] = best if best <= reach2 else np.inf
 
 
