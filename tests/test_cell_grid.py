@@ -218,3 +218,33 @@ def test_nearest_other_equals_the_kd_tree_bit_for_bit(name, X):
     want = cKDTree(X).query(X, k=2)[0][:, 1]
     for sample in (16, 4096):
         np.testing.assert_array_equal(cell_grid.nearest_other(X, sample=sample), want)
+
+
+def test_nearest_other_leaves_overfull_cells_to_the_kd_tree(monkeypatch):
+    """A sample that misses a dense clump guesses cells far too large for it: the kd-tree
+    answers instead of a cell search over the whole clump."""
+    rng = np.random.default_rng(2)
+    X = np.unique(np.r_[rng.random((2000, 3)) * 1e-3, rng.random((2000, 2)) @ np.eye(2, 3)],
+                  axis=0)
+    want = cKDTree(X).query(X, k=2)[0][:, 1]
+    sample = np.flatnonzero(~(X < 1e-3).all(axis=1))[:64]  # none of the clump
+    calls = []
+    real_grid = cell_grid.CellGrid
+
+    def grid(X, h):
+        calls.append(real_grid(X, h))
+        return calls[-1]
+
+    def no_cells(*args):
+        raise AssertionError("searched the overfull cells")
+
+    class Sample:
+        def choice(self, n, m, replace):
+            return sample
+
+    monkeypatch.setattr(cell_grid, "CellGrid", grid)
+    monkeypatch.setattr(cell_grid, "_nearest_other", no_cells)
+    monkeypatch.setattr(cell_grid.np.random, "default_rng", lambda seed: Sample())
+    np.testing.assert_array_equal(cell_grid.nearest_other(X, sample=64), want)
+    everyone = np.arange(len(X))
+    assert calls[0].load(everyone, everyone) > cell_grid.NEAREST_MAX_LOAD

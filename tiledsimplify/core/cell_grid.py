@@ -474,13 +474,21 @@ def _nearest_other(pt, cell_of, near_start, near, pt_start, pt_xyz, reach2, out)
         out[i] = best if best <= reach2 else np.inf
 
 
+#: :func:`nearest_other` leaves cells for the kd-tree when a search would visit more points
+#: than this on average (35-45 on the quality clouds and the 1M scan; a random sample that
+#: misses a dense clump guesses cells far too large for it: 2,025 on a cloud with a tenth of
+#: its points in a clump, 1.24 s against the kd-tree's 0.24 s at 200k points)
+NEAREST_MAX_LOAD = 300.0
+
+
 def nearest_other(X, sample=4096, seed=0, factor=4.0):
     """Each point's distance to the nearest other point of ``X`` (distinct points), exactly as
     ``cKDTree(X).query(X, k=2)[0][:, 1]`` gives it, bit for bit.
 
     On a grid of cells ``factor`` times the spacing guessed from a random ``sample`` (its
     own nearest distances times ``sqrt(sample / n)``, as on a surface), with a kd-tree only
-    for the points whose nearest lies beyond the cells around them. On the 1M-point scan of
+    for the points whose nearest lies beyond the cells around them (the kd-tree alone where
+    cells would hold too many points: :data:`NEAREST_MAX_LOAD`). On the 1M-point scan of
     ``benchmarks/speed.py`` 0.40 s (no such point) against the kd-tree's 0.9 s (its query
     0.7-0.8 s); at twice the guess 0.75 s, 4 % of the points beyond their cells.
     """
@@ -494,6 +502,9 @@ def nearest_other(X, sample=4096, seed=0, factor=4.0):
     S = X[np.random.default_rng(seed).choice(n, m, replace=False)] if m < n else X
     guess = float(np.median(cKDTree(S).query(S, k=2)[0][:, 1])) * np.sqrt(m / n)
     grid = CellGrid(X, factor * guess)
+    everyone = np.arange(n)
+    if grid.load(everyone, everyone) > NEAREST_MAX_LOAD:
+        return cKDTree(X).query(X, k=2)[0][:, 1]
     _nearest_other(grid.pt, grid.cell_of, grid.near_start, grid.near, grid.pt_start,
                    grid.pt_xyz, grid.reach * grid.reach, out)
     miss = np.flatnonzero(np.isinf(out))
