@@ -248,3 +248,16 @@ def test_nearest_other_leaves_overfull_cells_to_the_kd_tree(monkeypatch):
     np.testing.assert_array_equal(cell_grid.nearest_other(X, sample=64), want)
     everyone = np.arange(len(X))
     assert calls[0].load(everyone, everyone) > cell_grid.NEAREST_MAX_LOAD
+
+
+def test_visits_count_the_points_of_the_cells_around():
+    rng = np.random.default_rng(3)
+    X = rng.random((3000, 3)) * [1, 1, 0.1]
+    grid = cell_grid.CellGrid(X, 0.07)
+    q = rng.choice(len(X), 200, replace=False)
+    want = [sum(np.count_nonzero(grid.cell_of == c)
+                for c in grid.near[grid.near_start[grid.cell_of[i]]:grid.near_start[grid.cell_of[i] + 1]])
+            for i in q]
+    np.testing.assert_array_equal(grid.visits(q), want)
+    assert grid.visits(q).mean() == pytest.approx(grid.load(np.arange(len(X)), q))
+    assert grid.visits(np.zeros(0, dtype=np.int64)).size == 0

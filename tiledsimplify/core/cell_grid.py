@@ -63,6 +63,18 @@ class CellGrid:
         around = np.add.reduceat(cnt[self.near], self.near_start[:-1])
         return float(around[self.cell_of[queries]].mean())
 
+    def visits(self, queries):
+        """How many points a search from each of ``queries`` (point ids) visits: the points
+        of the cells around its own. Costs the queries' cells, not every cell's (a
+        :meth:`load` of every point over every point took ~0.7 s at 1e7 points)."""
+        cells = self.cell_of[np.asarray(queries, dtype=np.int64)]
+        lo = self.near_start[cells]
+        ln = self.near_start[cells + 1] - lo
+        first = np.cumsum(ln) - ln
+        around = self.near[np.arange(int(ln.sum())) - np.repeat(first - lo, ln)]
+        per = self.pt_start[around + 1] - self.pt_start[around]
+        return np.add.reduceat(per, first) if cells.size else np.zeros(0, dtype=np.int64)
+
     def members(self, X, ids):
         """The points ``ids`` sorted into the cells: ``(start, slot, xyz)`` with ``slot`` the
         position in ``ids`` of each, cell by cell, and ``xyz`` their coordinates."""
@@ -502,8 +514,8 @@ def nearest_other(X, sample=4096, seed=0, factor=4.0):
     S = X[np.random.default_rng(seed).choice(n, m, replace=False)] if m < n else X
     guess = float(np.median(cKDTree(S).query(S, k=2)[0][:, 1])) * np.sqrt(m / n)
     grid = CellGrid(X, factor * guess)
-    everyone = np.arange(n)
-    if grid.load(everyone, everyone) > NEAREST_MAX_LOAD:
+    probe = np.arange(0, n, max(1, n // int(sample)))  # strided, not the guess's sample
+    if grid.visits(probe).mean() > NEAREST_MAX_LOAD:
         return cKDTree(X).query(X, k=2)[0][:, 1]
     _nearest_other(grid.pt, grid.cell_of, grid.near_start, grid.near, grid.pt_start,
                    grid.pt_xyz, grid.reach * grid.reach, out)
