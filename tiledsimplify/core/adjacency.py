@@ -15,7 +15,7 @@ from ._jit import jit, jit_leaf
 
 
 @jit
-def _fill_sorted(n, edges, slack):
+def _fill_sorted(n, edges, slack, room):
     """:func:`from_edges` for edges ``(i, j)``, ``i < j``, sorted by ``(i, j)``, in linear time.
 
     Row ``i`` then lists the ``j < i`` (first ends of edges ``(j, i)``, met in increasing
@@ -32,7 +32,7 @@ def _fill_sorted(n, edges, slack):
     used = 0
     for i in range(n):
         used += cnt[i] + slack
-    pool = np.full(max(2 * used, 16), -1, dtype=np.int32)
+    pool = np.full(max(room * used, 16), -1, dtype=np.int32)
     fill = start.copy()
     for e in range(edges.shape[0]):  # smaller neighbours first, in increasing order
         j = edges[e, 1]
@@ -56,12 +56,16 @@ def _is_sorted_upper(edges):
     return True
 
 
-def from_edges(n, edges, slack=8):
-    """Build ``(start, cnt, cap, pool)`` from undirected ``edges`` (k, 2) on ``n`` points."""
+def from_edges(n, edges, slack=8, room=2):
+    """Build ``(start, cnt, cap, pool)`` from undirected ``edges`` (k, 2) on ``n`` points.
+
+    The pool holds ``room`` times the slots the lists take (with their ``slack``): 2 leaves
+    as much again for lists that outgrow their capacity (:func:`append_in_place`); 1 for lists that
+    are only read (the Voronoi candidates: 0.56 GB less at 1e7 points)."""
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     if n > 0 and edges.shape[0] and _is_sorted_upper(np.ascontiguousarray(edges)):
         # the Voronoi construction's edges come sorted, each with i < j: no sort needed
-        return _fill_sorted(n, np.ascontiguousarray(edges), slack)
+        return _fill_sorted(n, np.ascontiguousarray(edges), slack, room)
     src = np.concatenate([edges[:, 0], edges[:, 1]])
     dst = np.concatenate([edges[:, 1], edges[:, 0]])
     order = np.lexsort((dst, src))
@@ -71,7 +75,7 @@ def from_edges(n, edges, slack=8):
     start = np.zeros(n, dtype=np.int64)
     np.cumsum(cap[:-1], out=start[1:])
     used = int(cap.sum())
-    pool = np.full(max(2 * used, 16), -1, dtype=np.int32)
+    pool = np.full(max(room * used, 16), -1, dtype=np.int32)
     first = np.zeros(n, dtype=np.int64)
     np.cumsum(cnt[:-1], out=first[1:])
     rank_in_src = np.arange(src.size) - first[src]

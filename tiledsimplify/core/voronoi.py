@@ -587,7 +587,7 @@ def voronoi_neighbours(X, slack=8, scale=None, reach=math.inf):
     n = X.shape[0]
     edges, how = candidate_edges(X, reach)
     D = scale_of(X) if scale is None else float(scale)
-    start, cnt, cap, pool, meta = adjacency.from_edges(n, edges, slack=0)
+    start, cnt, cap, pool, meta = adjacency.from_edges(n, edges, slack=0, room=1)  # read only
     kept = filter_candidates(X, start, cnt, pool, BOX_FACTOR * D, TOL_FACTOR * D, float(reach))
     return adjacency.from_edges(n, kept, slack=slack), how
 
