@@ -48,7 +48,7 @@ SCHEME = "protected-first, blocks"
 #: consecutive points sampled together, each block in the hash order. One hash order over
 #: the whole cloud visited its points at random: a pass over the 1M-point scan of
 #: ``benchmarks/speed.py`` took 0.41 s (22x the 100k-point pass), by blocks of 4,096 (a
-#: patch of a few hundred spacings², whose lists stay in cache) 0.11 s, keeping 0.2 % more
+#: patch of ~4,000 spacings², whose lists stay in cache) 0.11 s, keeping 0.2 % more
 #: points at the same radius (256: 0.10 s, +0.4 %; 65,536: 0.19 s, +0.1 %)
 BLOCK = 4096
 #: secant steps on the radius at most; each is one pass over the graph
