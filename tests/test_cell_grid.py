@@ -250,14 +250,21 @@ def test_nearest_other_leaves_overfull_cells_to_the_kd_tree(monkeypatch):
     assert calls[0].load(everyone, everyone) > cell_grid.NEAREST_MAX_LOAD
 
 
-def test_visits_count_the_points_of_the_cells_around():
+def test_load_counts_the_members_of_the_cells_around_the_queries():
     rng = np.random.default_rng(3)
     X = rng.random((3000, 3)) * [1, 1, 0.1]
     grid = cell_grid.CellGrid(X, 0.07)
     q = rng.choice(len(X), 200, replace=False)
-    want = [sum(np.count_nonzero(grid.cell_of == c)
-                for c in grid.near[grid.near_start[grid.cell_of[i]]:grid.near_start[grid.cell_of[i] + 1]])
-            for i in q]
-    np.testing.assert_array_equal(grid.visits(q), want)
-    assert grid.visits(q).mean() == pytest.approx(grid.load(np.arange(len(X)), q))
-    assert grid.visits(np.zeros(0, dtype=np.int64)).size == 0
+    members = np.flatnonzero(rng.random(len(X)) < 0.3)
+
+    def around(i, among):
+        cells = grid.near[grid.near_start[grid.cell_of[i]]:grid.near_start[grid.cell_of[i] + 1]]
+        return np.isin(grid.cell_of[among], cells).sum()
+
+    everyone = np.arange(len(X))
+    for qs in (q, q[:5]):  # queries in most cells (one pass over all), in a few (their own)
+        want = [around(i, everyone) for i in qs]
+        assert grid.load(None, qs) == pytest.approx(np.mean(want))
+        assert grid.load(everyone, qs) == pytest.approx(np.mean(want))
+        assert grid.load(members, qs) == pytest.approx(np.mean([around(i, members) for i in qs]))
+    assert grid.load(None, np.zeros(0, dtype=np.int64)) == 0.0
