@@ -380,3 +380,28 @@ def test_a_folder_without_las_files_says_what_it_holds(tmp_path, caplog):
     assert f"no .las/.laz files in folder {folder} (it holds 3 other file(s), e.g. a.ply: a " \
         "folder is read as LAS/LAZ tiles; give one file of another format" in caplog.text
     assert "file not found" not in caplog.text
+
+
+def test_edge_angle_reaches_both_commands(tmp_path, caplog):
+    """``--edge-angle``: a 35° ridge is flagged at 30 and not at the default 40, by simplify
+    and by run; a value outside (0, 90] fails before any work, naming the option."""
+    rng = np.random.default_rng(6)
+    xy = rng.random((8000, 2)) * 2 - 1
+    X = np.c_[xy, -np.tan(np.deg2rad(17.5)) * np.abs(xy[:, 0])]  # folds by 35° along x = 0
+    path = tmp_path / "roof.npy"
+    np.save(path, X)
+    for command in ("simplify", "run"):
+        flagged = {}
+        for angle in (None, "30"):
+            out = tmp_path / f"{command}_{angle}.npy"
+            extra = [] if angle is None else ["--edge-angle", angle]
+            assert main([command, str(path), str(out), "--ratio", "0.3", "-q", *extra]) \
+                == EXIT_OK
+            flagged[angle] = int(np.load(out)["sharp_edge"].sum())
+        assert flagged[None] == 0 and flagged["30"] > 10, (command, flagged)
+        out = tmp_path / f"{command}_bad.npy"
+        with caplog.at_level("ERROR", logger="tiledsimplify"):
+            assert main([command, str(path), str(out), "--ratio", "0.3", "-q",
+                         "--edge-angle", "95"]) == EXIT_INPUT
+        assert "options.edge_angle must be a fold in degrees" in caplog.text
+        assert not out.exists()

@@ -7,6 +7,7 @@ from tiledsimplify import SimplifyOptions, metrics, simplify_points, synthetic
 from tiledsimplify.core import edge_fit
 from tiledsimplify.core.linalg import NO_MOMENTS, add_moments
 from tiledsimplify.core.simplify import neighbourhoods, scale_of
+from tiledsimplify.errors import InputError
 from tiledsimplify.io import read_mesh
 
 
@@ -18,7 +19,7 @@ def _roof(rng, n, angle_deg=90.0, noise=0.0):
     return X + noise * rng.normal(size=X.shape)
 
 
-def _localise_all(X):
+def _localise_all(X, min_angle=edge_fit.MIN_ANGLE):
     X = X - X.mean(0)
     st = neighbourhoods(X, scale_of(X))
     nn = np.empty(len(X))
@@ -26,7 +27,7 @@ def _localise_all(X):
     n = len(X)
     out, angle, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
     edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, np.ones(n, bool), out, angle, line,
-                      local)
+                      local, min_angle)
     return out, nn, angle
 
 
@@ -85,12 +86,34 @@ def test_a_wedge_needs_points_at_its_line(start, found):
     side = np.repeat([0, 1], c // 2)
     line = np.empty(6)
     d, fold = edge_fit._fit_edge(X, idx, c, side, np.empty(3), np.empty(3), np.empty(3),
-                                 np.empty(3), np.empty(3), 0.5, line)
+                                 np.empty(3), np.empty(3), 0.5, line,
+                                 np.cos(np.deg2rad(edge_fit.MIN_ANGLE)))
     if found:
         assert fold == pytest.approx(130.0, abs=1e-6)
         assert d == pytest.approx(start, rel=1e-6)  # X[0] = (start, -2, 0), the line is the y axis
     else:
         assert d == np.inf and fold == 0.0
+
+
+def test_edge_angle_sets_the_least_fold_of_a_sharp_edge():
+    # a ridge folding by 35°: below the default least fold (40°), above 30°
+    X = _roof(np.random.default_rng(6), 8000, angle_deg=145.0)
+    est, nn, _ = _localise_all(X)
+    true = np.abs(X[:, 0]) / np.cos(np.deg2rad(17.5)) / np.median(nn)  # in spacings
+    near = (true < 0.5) & (np.abs(X[:, 1]) < 0.8)  # on the ridge, away from its open ends
+    assert not np.isfinite(est[near]).any()
+    est, _, angle = _localise_all(X, min_angle=30.0)
+    found = np.isfinite(est[near])
+    assert found.mean() > 0.9
+    assert abs(np.median(angle[near][found]) - 35.0) < 3.0
+    # through the options, end to end: flags along the ridge with 30, none with the default
+    flags = {a: simplify_points(X, 0.3, options=SimplifyOptions(edge_angle=a)).boundary
+             for a in (30.0, edge_fit.MIN_ANGLE)}
+    # (measured, seeds 6-8: 26-50 % of the points within half a spacing, 6-7 % at 0.75-1)
+    assert flags[30.0][near].mean() > 0.2 and not flags[edge_fit.MIN_ANGLE].any()
+    assert flags[30.0][true > 1.5].sum() == 0  # and only there
+    with pytest.raises(InputError, match="edge_angle must be a fold in degrees"):
+        SimplifyOptions(edge_angle=95.0)
 
 
 def test_band_is_narrower_beside_a_soft_edge():
@@ -261,7 +284,8 @@ def test_borrow_equals_a_naive_search(data_dir):
     edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
     cand = dev > edge_fit.CANDIDATE
     dist, ang, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
-    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, cand, dist, ang, line, local)
+    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, cand, dist, ang, line, local,
+                      edge_fit.MIN_ANGLE)
     fitted = np.isfinite(dist)
     np.testing.assert_allclose(np.linalg.norm(line[fitted, 3:], axis=1), 1.0, atol=1e-12)
     for width in (1.0, 0.5):

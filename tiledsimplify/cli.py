@@ -42,6 +42,8 @@ EXIT_OK, EXIT_ERROR, EXIT_INPUT, EXIT_BUDGET = 0, 1, 2, 3
 #: terminal (SIGHUP). Python's default for them ends the process at once, leaving the
 #: temporary tile store behind (~43 bytes an input point) and no word in the log.
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+EDGE_ANGLE_HELP = ("mode coverage: the least fold of a sharp edge in degrees, above 0 and at "
+                   "most 90 (default 40); lower flags shallower chamfers and bevels too")
 
 
 class Stopped(BaseException):
@@ -96,6 +98,8 @@ def _parser():
     s.add_argument("--boundary-threshold", type=float, default=None,
                    help="fixed threshold on the normal-deviation measure (default: automatic)")
     s.add_argument("--no-boundary", action="store_true", help="do not flag sharp-edge points")
+    s.add_argument("--edge-angle", type=float, default=None, metavar="DEGREES",
+                   help=EDGE_ANGLE_HELP)
     s.add_argument("--mode", choices=MODES, default=MODES[0],
                    help="coverage (default): thin edge flags, no emptied faces; paper: the "
                         "published rule")
@@ -134,6 +138,8 @@ def _parser():
                    help="halo width in model units (default: 10 x estimated spacing)")
     r.add_argument("--mode", choices=MODES, default=None,
                    help="coverage (default) or paper; overrides [simplify] mode")
+    r.add_argument("--edge-angle", type=float, default=None, metavar="DEGREES",
+                   help=EDGE_ANGLE_HELP + "; overrides [simplify] edge_angle")
     r.add_argument("--floor", type=float, default=None,
                    help="each tile first runs down to this fraction of the target ratio "
                         "(0.5); tiles the global cut needs deeper run again. Changes the "
@@ -295,6 +301,8 @@ def _run(args):
         run_cfg.pop("count" if args.ratio is not None else "ratio")
     if args.mode is not None:
         simplify_cfg = {**simplify_cfg, "mode": args.mode}
+    if args.edge_angle is not None:
+        simplify_cfg = {**simplify_cfg, "edge_angle": args.edge_angle}
     try:
         options = SimplifyOptions.from_mapping(simplify_cfg)
     except InputError as exc:
@@ -338,6 +346,9 @@ def check_memory(name, n, room=None, per_point=PEAK_BYTES_PER_POINT + 24, doing=
 
 def _simplify(args):
     t0 = time.perf_counter()
+    extra = {} if args.edge_angle is None else {"edge_angle": args.edge_angle}
+    options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
+                              detect_boundary=not args.no_boundary, **extra)  # before reading
     check_output(args.output)
     check_not_input(args.output, [args.input])
     source = open_source(args.input)
@@ -350,8 +361,6 @@ def _simplify(args):
     degrees = degrees_message(args.input, xyz.min(axis=0), xyz.max(axis=0))
     if degrees:
         log.warning("%s", degrees)
-    options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
-                              detect_boundary=not args.no_boundary)
     if machine.cpus() > 1:  # a cold cache: all cores compile (at once if warm)
         compile_cache.compile_all()
     with warnings.catch_warnings(record=True) as caught:

@@ -18,9 +18,10 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    the k-means in a wrong split; when the fit fails, it is tried once more from a **line
    sweep**: the split of the neighbours by a straight line in their mean plane (``NDIR``
    directions, every offset) with the least total squared distance to the two planes, which
-   is where a sharp edge projects. If the faces fold by more than ``MIN_ANGLE`` (a wedge's
-   fold is more than 90°: its faces meet at less than 90°) and each has at least ``MIN_SIDE``
-   points, the edge is the planes' line of intersection and the candidate is flagged only
+   is where a sharp edge projects. If the faces fold by more than ``MIN_ANGLE`` (the option
+   ``edge_angle``; a wedge's fold is more than 90°: its faces meet at less than 90°) and each
+   has at least ``MIN_SIDE`` points, the edge is the planes' line of intersection and the
+   candidate is flagged only
    when it lies within ``width`` local spacings of that line (local spacing: the median
    nearest-neighbour distance over the two-ring) — ``SOFT_WIDTH`` of that where the faces
    fold by less than ``SOFT_ANGLE`` (:func:`band`).
@@ -43,7 +44,8 @@ from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covarian
 CANDIDATE = 0.08
 #: default: flag candidates within this many local spacings of the fitted edge
 WIDTH = 1.0
-#: planes meeting at less than this angle (degrees) give no sharp edge (truth: > 30°). At an
+#: default of the option ``edge_angle``, passed to :func:`localise` as ``min_angle``: planes
+#: meeting at less than this angle (degrees) give no sharp edge (truth: > 30°). At an
 #: ordinary edge that angle is the faces' **fold** (the angle between their outward normals:
 #: 180° less the angle between the two half-planes); a wedge, whose faces meet at less than
 #: 90°, folds by 180° less it. The fold is what :func:`band` and :func:`borrow` see (a 50°
@@ -343,9 +345,11 @@ def _project(X, idx, c, p, t1, t2, angle, proj):
 
 
 @jit
-def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing, proj, line):
+def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing, proj, line,
+                  max_cos):
     """Step 2: ``(distance, angle)`` — the distance from ``idx[0]`` to the edge of a two-plane
-    fit of ``idx[:c]`` and the faces' fold there (degrees, 0-180, see ``MIN_ANGLE``).
+    fit of ``idx[:c]`` and the faces' fold there (degrees, 0-180, see ``MIN_ANGLE``; planes
+    whose angle has a cosine above ``max_cos`` in absolute value give no edge).
 
     ``normals`` are one-ring normals (sharper across the edge than smoothed ones). The fit
     starts from the normal seeds; if that fails, once more from the line sweep
@@ -354,13 +358,13 @@ def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing, proj,
     :func:`_fit_edge`); otherwise ``line`` holds the edge (:func:`_edge_line`).
     """
     _seed_by_normals(normals, idx, c, side)
-    d, angle = _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line)
+    d, angle = _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos)
     if d < np.inf:
         return d, angle
     # c1, n1, c2 serve as the sweep's frame (normal, t1, t2): the fit overwrites them anyway
     if not _seed_by_sweep(X, idx, c, side, proj, c1, n1, c2, work):
         return np.inf, 0.0
-    return _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line)
+    return _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos)
 
 
 @jit_leaf
@@ -394,7 +398,7 @@ def _line_distance(X, p, line):
 
 
 @jit
-def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
+def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
     """Two-plane k-means from the split ``side``, then ``(distance, angle)``: the distance from
     ``idx[0]`` to the planes' line of intersection and the faces' fold there (degrees, 0-180):
     180° less the angle between the half-planes the two sides span from the line, each side's
@@ -404,7 +408,8 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
 
     The distance is ``inf`` when the points are not two planes meeting at a sharp edge: a side
     with fewer than ``MIN_SIDE`` points or spread less than ``MIN_SPREAD`` spacings across (a
-    row, not a face), planes within ``MIN_ANGLE`` of parallel, a side whose RMS distance to its
+    row, not a face), planes nearer parallel than the least fold (``|cos|`` of their angle
+    above ``max_cos``, the cosine of ``MIN_ANGLE`` by default), a side whose RMS distance to its
     plane exceeds ``MAX_RMS`` spacings (a curved or rough patch, not two faces), sides that do
     not lie each on its own side of the line (more than ``MAX_MIXED`` of a side's points
     farther than half a spacing from the line on the wrong side: a noisy surface split in two
@@ -439,8 +444,8 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line):
             or work[1] < min_spread):
         return np.inf, 0.0
     cs = n1[0] * n2[0] + n1[1] * n2[1] + n1[2] * n2[2]
-    if abs(cs) > np.cos(np.deg2rad(MIN_ANGLE)):
-        return np.inf, 0.0  # the fold is the planes' angle or 180° less it: below MIN_ANGLE
+    if abs(cs) > max_cos:
+        return np.inf, 0.0  # the fold is the planes' angle or 180° less it: below the least
     # each side on its own side of the line: offsets along t_i = u x n_i, u = n1 x n2 (unit
     # vectors, t_1 . t_2 = n1 . n2); the sign s_i of a side's mean offset gives the direction
     # s_i t_i from the line into its half-plane, so the half-planes' angle has cosine
@@ -494,17 +499,21 @@ def nearest_distances(X, start, cnt, pool, out):
 
 
 @jit
-def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local):
+def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min_angle):
     """Step 2 for every candidate: ``out[p]`` = edge distance / local spacing (inf: no edge),
     ``angle[p]`` = the fold of the fitted faces (degrees, 0-180, see ``MIN_ANGLE``; 0 where no
     edge),
     ``line[p]`` = the fitted edge line where there is one (:func:`_edge_line`; undefined
     elsewhere), ``local[p]`` = the local spacing (0 for points that are not candidates).
+    ``min_angle``: the least fold of a sharp edge, in degrees (``MIN_ANGLE`` by default, the
+    option ``edge_angle``; at most 90: the test is on the planes' angle, so wedges whose faces
+    meet at less than it are not found either).
 
     Local spacing: the median over ``p`` and its two-ring of ``nn`` (each point's distance to
     its nearest neighbour, :func:`nearest_distances`).
     """
     n = X.shape[0]
+    max_cos = np.cos(np.deg2rad(min_angle))
     mark = np.zeros(n, dtype=np.int64)
     idx = np.empty(MAX_RING + 1, dtype=np.int64)
     side = np.empty(MAX_RING + 1, dtype=np.int64)
@@ -530,7 +539,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local):
         if s <= 0.0:
             continue
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
-                                    line[p])
+                                    line[p], max_cos)
         out[p] = d / s
 
 

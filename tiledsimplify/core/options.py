@@ -7,7 +7,7 @@ import numpy as np
 
 from ..errors import InputError
 from .boundary import FLOOR, K_SIGMA
-from .edge_fit import WIDTH
+from .edge_fit import MIN_ANGLE, WIDTH
 from .importance import MEASURES
 from .removal import GUARDS
 
@@ -70,6 +70,13 @@ class SimplifyOptions:
         (0.7 of it beside edges whose faces fold by less than 60°, :func:`.edge_fit.band`;
         0.5 of it from a neighbour's edge where a candidate's own fit does not flag it,
         :func:`.edge_fit.borrow`).
+    edge_angle : float
+        ``"coverage"``: the least fold, in degrees, of a sharp edge: where the two faces fitted
+        around a candidate fold by less (the angle between their planes), it is not flagged.
+        Wedges whose faces meet at less than this angle are not found either, so at most 90.
+        Default 40 (:data:`.edge_fit.MIN_ANGLE`, measured against 35 and 45); lower it for
+        parts whose features fold by 30-40° (chamfers, shallow bevels): more of them flagged,
+        and more flags on fillets and noisy scans.
     coverage : float
         Strength of the coverage term: the importance is Eq. (1) + ``coverage / (3 · spacing)
         · ρ²`` (ρ²: mean squared distance to the local-mesh neighbours). Larger: more even
@@ -143,6 +150,7 @@ class SimplifyOptions:
     boundary_k: float = K_SIGMA
     boundary_floor: float = FLOOR
     edge_width: float = WIDTH
+    edge_angle: float = MIN_ANGLE
     coverage: float = COVERAGE
     spacing: float | None = None
     reach: float | None = None
@@ -194,6 +202,9 @@ class SimplifyOptions:
         for name in ("edge_width", "coverage"):
             if not getattr(self, name) > 0:
                 raise InputError(f"options.{name} must be positive, got {getattr(self, name)!r}.")
+        if not 0 < self.edge_angle <= 90:
+            raise InputError("options.edge_angle must be a fold in degrees, above 0 and at most "
+                             f"90 (default {MIN_ANGLE:g}), got {self.edge_angle!r}.")
         if self.spacing is not None and not self.spacing > 0:
             raise InputError("options.spacing must be a positive distance in model units or "
                              f"None, got {self.spacing!r}.")

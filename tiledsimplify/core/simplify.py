@@ -187,7 +187,7 @@ def boundary_flags(Xu, st, options):
     edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
     fitted, fitted_angle, line, local = np.empty(m), np.empty(m), np.empty((m, 6)), np.empty(m)
     edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, fitted,
-                      fitted_angle, line, local)
+                      fitted_angle, line, local, float(options.edge_angle))
     distance, angle = np.empty(m), np.empty(m)
     edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, options.edge_width,
                     edge_fit.band(fitted, fitted_angle, options.edge_width), distance, angle)
