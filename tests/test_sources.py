@@ -109,6 +109,44 @@ def test_a_bad_text_line_is_named_by_its_line_in_the_file(tmp_path):
         list(open_source(bad, chunk_points=4).chunks())
 
 
+def test_blank_and_comment_lines_are_not_points(tmp_path, cloud):
+    """Blank lines (a file's last ones, most often; CRLF too) and ``#`` comment lines are
+    skipped, not counted: the count was that of the lines, the reader skipped them, and a
+    ``run`` failed with 'n_total was given as 1005 but the chunks hold 1003 points' (one
+    chunk) or misplaced every later chunk. An empty file has no points (its count was -1)."""
+    rows = [f"{x!r} {y!r} {z!r}" for x, y, z in cloud.tolist()]
+    texts = {"trail.xyz": "\n".join(rows) + "\n\n\n",
+             "mid.xyz": "x y z\n" + "\n".join(rows[:500]) + "\n  \n# a comment\n\n"
+                        + "\n".join(rows[500:]) + "\n",
+             "crlf.txt": "# exported\r\n" + "\r\n".join(rows[:333]) + "\r\n\r\n"
+                         + "\r\n".join(rows[333:]),  # no newline at the end
+             "c.csv": "x,y,z\n" + "\n".join(r.replace(" ", ",") for r in rows) + "\n\n"}
+    for name, text in texts.items():
+        path = tmp_path / name
+        path.write_bytes(text.encode())
+        for chunk in (100, 1003, 10_000):
+            src, xyz = _chunked(path, chunk)
+            assert src.count == len(cloud), name
+            np.testing.assert_array_equal(xyz, cloud)
+            got = np.concatenate([c[1] for p in src.parts(2 * chunk) for c in p()])
+            np.testing.assert_array_equal(got, cloud)
+    bad = tmp_path / "b.xyz"
+    bad.write_text("x y z\n1 2 3\n\n# c\n4 five 6\n")
+    with pytest.raises(FileFormatError, match=r"line 5 \(point 1\): '4 five 6'"):
+        list(open_source(bad, chunk_points=4).chunks())
+    for text in ("", "x y z\n", "\n\n"):
+        (tmp_path / "e.xyz").write_text(text)
+        assert open_source(tmp_path / "e.xyz").count == 0
+
+
+def test_a_run_on_text_with_blank_last_lines_keeps_the_count(tmp_path, cloud):
+    from tiledsimplify.pipeline import run
+    path = tmp_path / "t.xyz"
+    path.write_text("".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in cloud.tolist()) + "\n\n")
+    summary = run(path, tmp_path / "o.npy", count=500)
+    assert summary.n_input == len(cloud) and len(np.load(tmp_path / "o.npy")) == 500
+
+
 @pytest.mark.parametrize("suffix", [".ply", ".xyz", ".npy"])
 def test_non_finite_points_fail_naming_the_file_and_the_point(tmp_path, cloud, suffix):
     bad = cloud.copy()

@@ -191,18 +191,22 @@ class TextSource:
     """Chunks of an ASCII point file (XYZ/CSV/TXT, or the vertex block of an ASCII PLY).
 
     ``offsets[k]``: the byte where chunk ``k``'s first line starts (found by the scan that
-    opened the file, :func:`_scan_lines`), so a part starts reading there."""
+    opened the file, :func:`_scan_lines` or :func:`_scan_points`), so a part starts reading
+    there; ``lines[k]``: that line's index in the file (0 = the first line), for errors
+    (default: ``skip_lines + k * chunk_points``, a file without blank or comment lines)."""
 
     is_las = False
 
     def __init__(self, path, chunk_points, *, skip_lines, count, delimiter, offsets,
-                 colour=None):
+                 colour=None, lines=None):
         self.files = [Path(path)]
         self.chunk_points = int(chunk_points)
         self._skip = skip_lines
         self._count = int(count)
         self._delimiter = delimiter
         self._offsets = list(offsets)
+        self._lines = (list(lines) if lines is not None else
+                       [skip_lines + k * self.chunk_points for k in range(len(self._offsets))])
         self._colour = colour  # an ASCII PLY's ((column, type) of red, green, blue)
 
     @property
@@ -222,8 +226,8 @@ class TextSource:
         and read independently."""
         path = self.files[0].absolute()
         return [TextPart(path, self._offsets[lo // self.chunk_points], lo, hi,
-                         self.chunk_points, self._skip, self._delimiter, self._count,
-                         self._colour)
+                         self.chunk_points, self._lines[lo // self.chunk_points],
+                         self._delimiter, self._count, self._colour)
                 for lo, hi in part_ranges(self._count, max_points, self.chunk_points)]
 
 
@@ -262,14 +266,15 @@ def _scan_lines(path, first, every, count):
 
 class TextPart:
     """Points ``lo`` to ``hi - 1`` of a text point file, read as its :class:`TextSource`'s
-    chunks from byte ``offset``, where line ``skip + lo`` starts (``skip``: the header's lines,
-    for the line numbers of errors); pickles."""
+    chunks from byte ``offset``, where point ``lo`` starts, on the file's line ``line0``
+    (0-based, for the line numbers of errors). Blank lines and ``#`` comment lines are not
+    points (:func:`_is_point_line`, as :func:`_scan_points` counts them); pickles."""
 
-    def __init__(self, path, offset, lo, hi, chunk_points, skip, delimiter, count,
+    def __init__(self, path, offset, lo, hi, chunk_points, line0, delimiter, count,
                  colour=None):
         self.path, self.offset = Path(path), int(offset)
         self.lo, self.hi = int(lo), int(hi)
-        self.chunk_points, self.skip = int(chunk_points), int(skip)
+        self.chunk_points, self.line0 = int(chunk_points), int(line0)
         self.delimiter, self.count = delimiter, int(count)
         self.colour = colour
 
@@ -284,29 +289,94 @@ class TextPart:
         with open(path, "rb") as raw:
             raw.seek(self.offset)
             fh = io.TextIOWrapper(raw, encoding="ascii", errors="replace")
+            numbered = ((k, line) for k, line in enumerate(fh, self.line0)
+                        if _is_point_line(line))
             while start < self.hi:
                 m = min(self.chunk_points, self.hi - start)
-                lines = list(itertools.islice(fh, m))
-                if len(lines) < m:
+                block = list(itertools.islice(numbered, m))
+                if len(block) < m:
                     raise FileFormatError(f"{path}: expected {self.count} points but the file "
-                                          f"ends after {start + len(lines)}; it is truncated.")
+                                          f"ends after {start + len(block)}; it is truncated.")
+                lines = [line for _, line in block]
                 cols = (0, 1, 2) + tuple(c for c, _ in (self.colour or ()))
                 try:
                     got = np.loadtxt(lines, delimiter=self.delimiter, usecols=cols,
                                      dtype=np.float64, ndmin=2)
                 except ValueError as exc:
                     i, text, why = _first_bad_line(lines, self.delimiter)
-                    where = (f"line {self.skip + start + i + 1} (point {start + i}): "
+                    where = (f"line {block[i][0] + 1} (point {start + i}): "
                              f"{text.strip()[:80]!r} ({why})" if i is not None
                              else f"the block of points from {start} ({exc})")
                     raise FileFormatError(f"{path}: unreadable point line at {where}; "
                                           "each line needs three numbers x y z; fix or remove "
                                           "it.") from None
+                if len(got) != m:  # a line numpy skips that _is_point_line does not
+                    raise FileFormatError(f"{path}: {m - len(got)} of the lines {block[0][0] + 1}"
+                                          f" to {block[-1][0] + 1} hold no point; remove them.")
                 xyz = np.ascontiguousarray(got[:, :3])
                 attrs = {las: colour_uint16(got[:, 3 + j], code)
                          for j, (las, (_, code)) in enumerate(zip(PLY_COLOURS, self.colour or ()))}
                 yield start, check_finite(xyz, start, [path]), attrs
                 start += m
+
+
+def _is_point_line(line):
+    """A line of a text point file that holds a point: not blank, not a ``#`` comment. What
+    :func:`_scan_points` counts, byte-wise (the same characters are whitespace: ASCII's)."""
+    s = line.lstrip()
+    return bool(s) and s[0] != "#"
+
+
+#: the bytes str.isspace() takes for whitespace in ASCII (a line of only these is blank)
+_BLANK = np.zeros(256, dtype=bool)
+_BLANK[[9, 10, 11, 12, 13, 28, 29, 30, 31, 32]] = True
+
+
+def _scan_points(path, first, every):
+    """One pass over a text point file: ``(count, offsets, lines)``, ``count`` its point lines
+    after its first ``first`` lines (a header): lines neither blank nor a ``#`` comment
+    (:func:`_is_point_line`, which the reader skips the same way; a file's blank last lines
+    are common); ``offsets[k]`` the byte and ``lines[k]`` the line index (0-based) where point
+    ``k * every`` starts. Counting newlines alone counted blank and comment lines as points,
+    and the reader, which skips them, then found fewer points than the count."""
+    count = line_no = base = 0  # points and lines before ``buf``, its first byte in the file
+    offsets, lines = [], []
+    carry = b""
+    with open(path, "rb") as fh:
+        while True:
+            block = fh.read(1 << 22)
+            buf = carry + block
+            if not buf:
+                break
+            a = np.frombuffer(buf, dtype=np.uint8)
+            ends = np.flatnonzero(a == 10)
+            if block:  # whole lines only: the rest waits for the next block
+                end = int(ends[-1]) + 1 if len(ends) else 0
+            else:  # the end of the file: a last line without a newline
+                end = len(buf)
+                ends = np.append(ends, len(buf))
+            if len(ends):
+                starts = np.concatenate(([0], ends[:-1] + 1))
+                ink = np.flatnonzero(~_BLANK[a[:end]])  # positions of non-blank bytes
+                if len(ink):
+                    j = np.minimum(np.searchsorted(ink, starts), len(ink) - 1)
+                    first_ink = ink[j]
+                    point = (first_ink >= starts) & (first_ink < ends) & (a[first_ink] != 35)
+                else:
+                    point = np.zeros(len(starts), dtype=bool)
+                index = line_no + np.arange(len(starts))
+                point &= index >= first
+                at = np.flatnonzero(point)
+                pick = at[(count + np.arange(len(at))) % every == 0]
+                offsets.extend((base + starts[pick]).tolist())
+                lines.extend(index[pick].tolist())
+                count += len(at)
+                line_no += len(starts)
+            carry = buf[end:]
+            base += end
+            if not block:
+                break
+    return count, offsets, lines
 
 
 def _first_bad_line(lines, delimiter):
@@ -337,14 +407,11 @@ def _text_header(path):
 
 
 def _text_layout(path, chunk_points):
-    """(lines to skip, number of points, delimiter, chunk offsets) of an XYZ/CSV/TXT file, by
-    one scan (:func:`_scan_lines`)."""
+    """(lines to skip, number of points, delimiter, chunk offsets, their line indices) of an
+    XYZ/CSV/TXT file, by one scan (:func:`_scan_points`)."""
     skip, delimiter = _text_header(path)
-    n_lines, last, offsets = _scan_lines(path, skip, chunk_points, None)
-    if last not in (b"", b"\n"):
-        n_lines += 1  # a last line without a newline
-    count = n_lines - skip
-    return skip, count, delimiter, offsets[:-(-count // chunk_points)]
+    count, offsets, lines = _scan_points(path, skip, chunk_points)
+    return skip, count, delimiter, offsets, lines
 
 
 def _ply_source(path, chunk_points):
@@ -411,9 +478,9 @@ def open_source(spec, chunk_points=1_000_000):
         if src is not None:
             return src
     if suffix in TEXT_SUFFIXES:
-        skip, count, delimiter, offsets = _text_layout(p, chunk_points)
+        skip, count, delimiter, offsets, lines = _text_layout(p, chunk_points)
         return TextSource(p, chunk_points, skip_lines=skip, count=count, delimiter=delimiter,
-                          offsets=offsets)
+                          offsets=offsets, lines=lines)
     if suffix == ".npy":
         arr = np.load(p, mmap_mode="r")
         mapped = None
