@@ -109,6 +109,30 @@ def test_a_bad_text_line_is_named_by_its_line_in_the_file(tmp_path):
         list(open_source(bad, chunk_points=4).chunks())
 
 
+def test_broken_npy_files_fail_naming_the_file(tmp_path, cloud):
+    """An empty .npy raised numpy's EOFError (exit 1 and a traceback); a truncated one, text
+    renamed .npy, an object array or a structured array without x, y, z gave numpy's words
+    without the file's name ("mmap length is greater than file size", "no field of name x")."""
+    np.save(tmp_path / "ok.npy", cloud)
+    data = (tmp_path / "ok.npy").read_bytes()
+    cases = {"empty.npy": (b"", "not a NumPy .npy file \\(an empty file\\)"),
+             "text.npy": (b"1 2 3\n4 5 6\n", ".*does not start with the .npy signature"),
+             "cut.npy": (data[:1000], "not a readable .npy file .*truncated")}
+    for name, (body, match) in cases.items():
+        (tmp_path / name).write_bytes(body)
+        with pytest.raises(FileFormatError, match=rf"{name}: {match}.*numpy.save"):
+            open_source(tmp_path / name)
+    np.save(tmp_path / "obj.npy", np.array([{"a": 1}], dtype=object))
+    np.save(tmp_path / "rec.npy", np.zeros(5, dtype=[("a", "f8"), ("b", "f8")]))
+    for name in ("obj.npy", "rec.npy"):
+        with pytest.raises(FileFormatError, match=rf"{name}: .*numpy.save"):
+            open_source(tmp_path / name)
+    from tiledsimplify.cli import main
+    assert main(["simplify", str(tmp_path / "empty.npy"), str(tmp_path / "o.npy"),
+                 "--ratio", "0.5"]) == 2
+    assert not (tmp_path / "o.npy").exists()
+
+
 def test_blank_and_comment_lines_are_not_points(tmp_path, cloud):
     """Blank lines (a file's last ones, most often; CRLF too) and ``#`` comment lines are
     skipped, not counted: the count was that of the lines, the reader skipped them, and a

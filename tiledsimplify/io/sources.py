@@ -458,6 +458,24 @@ def _is_las_spec(spec):
     return p.suffix.lower() in (".las", ".laz")
 
 
+def _load_npy(path):
+    """``np.load(path, mmap_mode="r")``, or a :class:`FileFormatError` naming the file, what is
+    wrong and the fix: numpy's own errors for an empty, truncated or non-NPY file name no
+    file ("mmap length is greater than file size"; an empty one raised EOFError, a
+    traceback)."""
+    with open(path, "rb") as fh:
+        magic = fh.read(6)
+    fix = "save the (n, 3) points with numpy.save(path, points)"
+    if magic != b"\x93NUMPY":
+        what = "an empty file" if not magic else "it does not start with the .npy signature"
+        raise FileFormatError(f"{path}: not a NumPy .npy file ({what}); {fix}.")
+    try:
+        return np.load(path, mmap_mode="r")
+    except (ValueError, OSError, EOFError) as exc:
+        raise FileFormatError(f"{path}: not a readable .npy file ({exc}); it may be truncated "
+                              f"or hold Python objects: {fix}.") from None
+
+
 def open_source(spec, chunk_points=1_000_000):
     """A chunked reader for ``spec``: ``.count``, ``.chunks()``, ``.files``, ``.is_las``."""
     from .e57 import E57Source, e57_files
@@ -482,12 +500,12 @@ def open_source(spec, chunk_points=1_000_000):
         return TextSource(p, chunk_points, skip_lines=skip, count=count, delimiter=delimiter,
                           offsets=offsets, lines=lines)
     if suffix == ".npy":
-        arr = np.load(p, mmap_mode="r")
+        arr = _load_npy(p)
         mapped = None
-        if arr.dtype.names:  # our own structured output
+        if arr.dtype.names and {"x", "y", "z"} <= set(arr.dtype.names):  # our own output
             arr = np.stack([arr["x"], arr["y"], arr["z"]], axis=1)
-        elif arr.ndim != 2 or arr.shape[1] < 3:
-            arr = read_points(p)
+        elif arr.dtype.names or arr.ndim != 2 or arr.shape[1] < 3 or arr.dtype.kind not in "fiu":
+            arr = read_points(p)  # (n, >3) and the rest, or an error naming what it holds
         elif isinstance(arr, np.memmap) and arr.flags.c_contiguous:
             mapped = (str(p.absolute()), int(arr.offset), arr.dtype, arr.shape)
         return ArraySource(arr, chunk_points, files=[p], mapped=mapped)
