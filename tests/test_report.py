@@ -164,6 +164,22 @@ def test_read_columns_round_trip(tmp_path):
         np.testing.assert_array_equal(got["simplify_rank"], cols["simplify_rank"])
 
 
+def test_an_ascii_ply_result_without_vertices_is_named(tmp_path, caplog):
+    """An ASCII PLY with ``element vertex 0`` (an export of an empty selection): np.loadtxt
+    gave a (0, 1) table and read_columns an IndexError, so ``report`` ended in a traceback
+    (exit 1) instead of naming the file."""
+    empty = tmp_path / "e.ply"
+    empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\n"
+                     "property float y\nproperty float z\nproperty uchar sharp_edge\n"
+                     "end_header\n")
+    xyz, got = read_columns(empty)
+    assert xyz.shape == (0, 3) and got["sharp_edge"].shape == (0,)
+    src = tmp_path / "s.npy"
+    np.save(src, np.random.default_rng(0).random((50, 3)))
+    assert main(["report", str(src), str(empty), "-o", str(tmp_path / "r"), "-q"]) == EXIT_INPUT
+    assert "e.ply: the result has no points" in caplog.text
+
+
 def test_read_columns_las_extra_dimensions(tmp_path):
     import laspy
 
