@@ -416,6 +416,11 @@ def main(argv=None):
     except (KeyboardInterrupt, Stopped) as exc:  # everything on the way cleaned up after it
         signum = getattr(exc, "signum", signal.SIGINT)
         message, code = _stopped_message(args, signum, time.perf_counter() - t0), 128 + signum
+    except Exception as exc:  # a bug: its traceback follows (exit 1), but a pipeline reading
+        # --summary must still learn that the run failed, as for every other failure
+        if args.command == "run" and getattr(args, "summary", None):
+            _failed_summary(args, EXIT_ERROR, f"unexpected error: {type(exc).__name__}: {exc}")
+        raise
     finally:
         for s, h in handlers.items():
             signal.signal(s, h)
