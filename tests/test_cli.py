@@ -257,6 +257,17 @@ def test_a_failed_run_still_writes_its_summary(tmp_path):
         "exit_code": EXIT_INPUT, "error": f"{missing}: file not found. Check the path."}
 
 
+def test_evaluate_an_empty_cloud_names_the_file(cloud, tmp_path, caplog):
+    """It said "`kept` must contain at least 1 point(s); got 0. Fix: pass a non-empty point
+    set." (the Python API's words), naming neither file nor side."""
+    empty = tmp_path / "empty.xyz"
+    empty.write_text("")
+    assert main(["evaluate", str(cloud[1]), str(empty), "-q"]) == EXIT_INPUT
+    assert "empty.xyz: the simplified cloud has no points" in caplog.text
+    assert main(["evaluate", str(empty), str(cloud[1]), "-q"]) == EXIT_INPUT
+    assert "empty.xyz: the original cloud has no points" in caplog.text
+
+
 def test_a_run_failing_unexpectedly_still_writes_its_summary(cloud, tmp_path, monkeypatch):
     """An exception that is no TiledSimplifyError/OSError (a bug; before the NPY fix, an empty
     .npy's EOFError) left the traceback and no --summary at all, though a pipeline reads the
