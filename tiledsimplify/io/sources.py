@@ -192,8 +192,9 @@ class TextSource:
 
     ``offsets[k]``: the byte where chunk ``k``'s first line starts (found by the scan that
     opened the file, :func:`_scan_lines` or :func:`_scan_points`), so a part starts reading
-    there; ``lines[k]``: that line's index in the file (0 = the first line), for errors
-    (default: ``skip_lines + k * chunk_points``, a file without blank or comment lines)."""
+    there; ``lines[k]``: that line's index in the file (0 = the first line), and one more
+    entry, the line after the last point (default: ``skip_lines + k * chunk_points``, a file
+    without blank or comment lines)."""
 
     is_las = False
 
@@ -205,8 +206,10 @@ class TextSource:
         self._count = int(count)
         self._delimiter = delimiter
         self._offsets = list(offsets)
-        self._lines = (list(lines) if lines is not None else
-                       [skip_lines + k * self.chunk_points for k in range(len(self._offsets))])
+        if lines is None:  # no blank or comment lines: point k on line skip_lines + k
+            lines = [skip_lines + k * self.chunk_points for k in range(len(self._offsets))]
+            lines.append(skip_lines + self._count)
+        self._lines = list(lines)  # and, last, the line after the last point
         self._colour = colour  # an ASCII PLY's ((column, type) of red, green, blue)
 
     @property
@@ -225,10 +228,11 @@ class TextSource:
         None: one part), each reading from the byte offset of its first line, so they pickle
         and read independently."""
         path = self.files[0].absolute()
-        return [TextPart(path, self._offsets[lo // self.chunk_points], lo, hi,
-                         self.chunk_points, self._lines[lo // self.chunk_points],
+        c = self.chunk_points
+        return [TextPart(path, self._offsets[lo // c], lo, hi, c,
+                         self._lines[lo // c:-(-hi // c)] + [self._lines[-(-hi // c)]],
                          self._delimiter, self._count, self._colour)
-                for lo, hi in part_ranges(self._count, max_points, self.chunk_points)]
+                for lo, hi in part_ranges(self._count, max_points, c)]
 
 
 def _scan_lines(path, first, every, count):
@@ -266,15 +270,17 @@ def _scan_lines(path, first, every, count):
 
 class TextPart:
     """Points ``lo`` to ``hi - 1`` of a text point file, read as its :class:`TextSource`'s
-    chunks from byte ``offset``, where point ``lo`` starts, on the file's line ``line0``
-    (0-based, for the line numbers of errors). Blank lines and ``#`` comment lines are not
-    points (:func:`_is_point_line`, as :func:`_scan_points` counts them); pickles."""
+    chunks from byte ``offset``, where point ``lo`` starts; ``lines``: the file's line index
+    (0-based) of each chunk's first point, and then of the line after the part's last point
+    (line numbers for errors, and where blank or ``#`` comment lines lie between: a chunk of
+    ``m`` points on ``m`` lines is read as it is, else its lines are filtered by
+    :func:`_is_point_line`, as :func:`_scan_points` counted them); pickles."""
 
-    def __init__(self, path, offset, lo, hi, chunk_points, line0, delimiter, count,
+    def __init__(self, path, offset, lo, hi, chunk_points, lines, delimiter, count,
                  colour=None):
         self.path, self.offset = Path(path), int(offset)
         self.lo, self.hi = int(lo), int(hi)
-        self.chunk_points, self.line0 = int(chunk_points), int(line0)
+        self.chunk_points, self.lines = int(chunk_points), [int(v) for v in lines]
         self.delimiter, self.count = delimiter, int(count)
         self.colour = colour
 
@@ -289,30 +295,35 @@ class TextPart:
         with open(path, "rb") as raw:
             raw.seek(self.offset)
             fh = io.TextIOWrapper(raw, encoding="ascii", errors="replace")
-            numbered = ((k, line) for k, line in enumerate(fh, self.line0)
-                        if _is_point_line(line))
-            while start < self.hi:
+            for j in itertools.count():
+                if start >= self.hi:
+                    break
                 m = min(self.chunk_points, self.hi - start)
-                block = list(itertools.islice(numbered, m))
-                if len(block) < m:
+                first, span = self.lines[j], self.lines[j + 1] - self.lines[j]
+                lines = list(itertools.islice(fh, span))
+                numbers = None  # line k of the chunk is the file's line first + k
+                if span != m:  # blank or comment lines among them
+                    numbers = [first + k for k, line in enumerate(lines) if _is_point_line(line)]
+                    lines = [line for line in lines if _is_point_line(line)]
+                if len(lines) < m:
                     raise FileFormatError(f"{path}: expected {self.count} points but the file "
-                                          f"ends after {start + len(block)}; it is truncated.")
-                lines = [line for _, line in block]
+                                          f"ends after {start + len(lines)}; it is truncated.")
                 cols = (0, 1, 2) + tuple(c for c, _ in (self.colour or ()))
                 try:
-                    got = np.loadtxt(lines, delimiter=self.delimiter, usecols=cols,
+                    got = np.loadtxt(lines[:m], delimiter=self.delimiter, usecols=cols,
                                      dtype=np.float64, ndmin=2)
                 except ValueError as exc:
-                    i, text, why = _first_bad_line(lines, self.delimiter)
-                    where = (f"line {block[i][0] + 1} (point {start + i}): "
+                    i, text, why = _first_bad_line(lines[:m], self.delimiter)
+                    line = 0 if i is None else first + i if numbers is None else numbers[i]
+                    where = (f"line {line + 1} (point {start + i}): "
                              f"{text.strip()[:80]!r} ({why})" if i is not None
                              else f"the block of points from {start} ({exc})")
                     raise FileFormatError(f"{path}: unreadable point line at {where}; "
                                           "each line needs three numbers x y z; fix or remove "
                                           "it.") from None
                 if len(got) != m:  # a line numpy skips that _is_point_line does not
-                    raise FileFormatError(f"{path}: {m - len(got)} of the lines {block[0][0] + 1}"
-                                          f" to {block[-1][0] + 1} hold no point; remove them.")
+                    raise FileFormatError(f"{path}: {m - len(got)} of the lines {first + 1} to "
+                                          f"{first + span} hold no point; remove them.")
                 xyz = np.ascontiguousarray(got[:, :3])
                 attrs = {las: colour_uint16(got[:, 3 + j], code)
                          for j, (las, (_, code)) in enumerate(zip(PLY_COLOURS, self.colour or ()))}
@@ -337,10 +348,11 @@ def _scan_points(path, first, every):
     after its first ``first`` lines (a header): lines neither blank nor a ``#`` comment
     (:func:`_is_point_line`, which the reader skips the same way; a file's blank last lines
     are common); ``offsets[k]`` the byte and ``lines[k]`` the line index (0-based) where point
-    ``k * every`` starts. Counting newlines alone counted blank and comment lines as points,
-    and the reader, which skips them, then found fewer points than the count."""
+    ``k * every`` starts, and ``lines[-1]`` the line after the last point. Counting newlines
+    alone counted blank and comment lines as points, and the reader, which skips them, then
+    found fewer points than the count."""
     count = line_no = base = 0  # points and lines before ``buf``, its first byte in the file
-    offsets, lines = [], []
+    offsets, lines, after = [], [], first
     carry = b""
     with open(path, "rb") as fh:
         while True:
@@ -357,26 +369,32 @@ def _scan_points(path, first, every):
                 ends = np.append(ends, len(buf))
             if len(ends):
                 starts = np.concatenate(([0], ends[:-1] + 1))
-                ink = np.flatnonzero(~_BLANK[a[:end]])  # positions of non-blank bytes
-                if len(ink):
-                    j = np.minimum(np.searchsorted(ink, starts), len(ink) - 1)
-                    first_ink = ink[j]
-                    point = (first_ink >= starts) & (first_ink < ends) & (a[first_ink] != 35)
-                else:
-                    point = np.zeros(len(starts), dtype=bool)
+                lead = a[np.minimum(starts, end - 1)]  # a line's first byte ("\n": empty)
+                point = ~_BLANK[lead] & (lead != 35)
+                indented = np.flatnonzero(_BLANK[lead] & (lead != 10))  # look past the blanks
+                if len(indented):  # step each over its blanks, all at once
+                    at, moving = starts[indented], np.arange(len(indented))
+                    while len(moving):
+                        c = a[np.minimum(at[moving], end - 1)]
+                        moving = moving[_BLANK[c] & (c != 10) & (at[moving] < end)]
+                        at[moving] += 1
+                    point[indented] = ((at < ends[indented])
+                                       & (a[np.minimum(at, end - 1)] != 35))
                 index = line_no + np.arange(len(starts))
                 point &= index >= first
                 at = np.flatnonzero(point)
                 pick = at[(count + np.arange(len(at))) % every == 0]
                 offsets.extend((base + starts[pick]).tolist())
                 lines.extend(index[pick].tolist())
+                if len(at):
+                    after = int(index[at[-1]]) + 1
                 count += len(at)
                 line_no += len(starts)
             carry = buf[end:]
             base += end
             if not block:
                 break
-    return count, offsets, lines
+    return count, offsets, lines + [after]
 
 
 def _first_bad_line(lines, delimiter):
