@@ -257,6 +257,36 @@ def test_a_failed_run_still_writes_its_summary(tmp_path):
         "exit_code": EXIT_INPUT, "error": f"{missing}: file not found. Check the path."}
 
 
+def test_evaluate_an_empty_cloud_names_the_file(cloud, tmp_path, caplog):
+    """It said "`kept` must contain at least 1 point(s); got 0. Fix: pass a non-empty point
+    set." (the Python API's words), naming neither file nor side."""
+    empty = tmp_path / "empty.xyz"
+    empty.write_text("")
+    assert main(["evaluate", str(cloud[1]), str(empty), "-q"]) == EXIT_INPUT
+    assert "empty.xyz: the simplified cloud has no points" in caplog.text
+    assert main(["evaluate", str(empty), str(cloud[1]), "-q"]) == EXIT_INPUT
+    assert "empty.xyz: the original cloud has no points" in caplog.text
+
+
+def test_a_run_failing_unexpectedly_still_writes_its_summary(cloud, tmp_path, monkeypatch):
+    """An exception that is no TiledSimplifyError/OSError (a bug; before the NPY fix, an empty
+    .npy's EOFError) left the traceback and no --summary at all, though a pipeline reads the
+    summary to learn how the run ended: it now says exit 1 and the error, then re-raises."""
+    import json
+
+    import tiledsimplify.pipeline as pipeline
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("boom")
+    monkeypatch.setattr(pipeline, "run", broken)
+    summary = tmp_path / "run.json"
+    with pytest.raises(RuntimeError, match="boom"):
+        main(["run", str(cloud[1]), str(tmp_path / "o.npy"), "--ratio", "0.25",
+              "--summary", str(summary), "-q"])
+    got = json.loads(summary.read_text())
+    assert got["exit_code"] == 1 and got["error"] == "unexpected error: RuntimeError: boom"
+
+
 @pytest.mark.parametrize("name, resumable", [("SIGTERM", False), ("SIGINT", True)])
 def test_a_stopped_run_cleans_up_says_how_to_go_on_and_resumes(tmp_path, name, resumable):
     """SIGTERM (a scheduler's timeout, a cancelled job) stops a run as Ctrl-C does: no output,

@@ -836,6 +836,22 @@ def test_a_run_stopped_in_its_ingest_ingests_again_and_an_empty_store_dir_is_use
     assert (tmp_path / "o.npy").read_bytes() == (tmp_path / "fresh.npy").read_bytes()
 
 
+def test_a_store_that_is_a_file_or_a_foreign_folder_is_refused_with_the_fix(bunny, tmp_path):
+    """``--store`` naming a file, or a folder of other things (a project's data folder): it
+    said "no tile store at DIR (no zarr.json there)", without what to give instead."""
+    _, path = bunny
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "mine.txt").write_text("keep me\n")
+    (tmp_path / "f.zarr").write_text("a file\n")
+    for store, what in [("data", "is a directory holding no tile store"),
+                        ("f.zarr", "is a file, not a directory")]:
+        with pytest.raises(InputError, match=rf"{store}: {what}; give --store a new or empty "
+                                             "directory"):
+            run(path, tmp_path / "o.npy", ratio=0.2, store=tmp_path / store)
+    assert (tmp_path / "data" / "mine.txt").read_text() == "keep me\n"
+    assert not (tmp_path / "o.npy").exists()
+
+
 def test_a_long_output_logs_its_progress(bunny, tmp_path, caplog, monkeypatch):
     """The output stage logs every tenth of the kept points written (and, for text, formatted)
     once it has run ``OUTPUT_QUIET`` seconds (0 here); a run's count is the last line's."""

@@ -164,6 +164,37 @@ def test_read_columns_round_trip(tmp_path):
         np.testing.assert_array_equal(got["simplify_rank"], cols["simplify_rank"])
 
 
+def test_an_ascii_ply_result_without_vertices_is_named(tmp_path, caplog):
+    """An ASCII PLY with ``element vertex 0`` (an export of an empty selection): np.loadtxt
+    gave a (0, 1) table and read_columns an IndexError, so ``report`` ended in a traceback
+    (exit 1) instead of naming the file."""
+    empty = tmp_path / "e.ply"
+    empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\n"
+                     "property float y\nproperty float z\nproperty uchar sharp_edge\n"
+                     "end_header\n")
+    xyz, got = read_columns(empty)
+    assert xyz.shape == (0, 3) and got["sharp_edge"].shape == (0,)
+    src = tmp_path / "s.npy"
+    np.save(src, np.random.default_rng(0).random((50, 3)))
+    assert main(["report", str(src), str(empty), "-o", str(tmp_path / "r"), "-q"]) == EXIT_INPUT
+    assert "e.ply: the simplified cloud has no points" in caplog.text
+    assert not (tmp_path / "r").exists()  # refused before the report's directory is made
+    from tiledsimplify.report import make_report
+    with pytest.raises(Exception, match="e.ply: the result has no points"):
+        make_report(src, empty, tmp_path / "r2", dpi=40)
+
+
+def test_report_into_a_file_is_refused(tmp_path, caplog):
+    """``-o`` naming an existing file: exit 1 with "File exists." (mkdir's words) before."""
+    src = tmp_path / "s.npy"
+    np.save(src, np.random.default_rng(0).random((50, 3)))
+    taken = tmp_path / "taken.txt"
+    taken.write_text("mine\n")
+    assert main(["report", str(src), str(src), "-o", str(taken), "-q"]) == EXIT_INPUT
+    assert "taken.txt: exists and is not a directory; give -o a directory" in caplog.text
+    assert taken.read_text() == "mine\n"
+
+
 def test_read_columns_las_extra_dimensions(tmp_path):
     import laspy
 

@@ -109,6 +109,68 @@ def test_a_bad_text_line_is_named_by_its_line_in_the_file(tmp_path):
         list(open_source(bad, chunk_points=4).chunks())
 
 
+def test_broken_npy_files_fail_naming_the_file(tmp_path, cloud):
+    """An empty .npy raised numpy's EOFError (exit 1 and a traceback); a truncated one, text
+    renamed .npy, an object array or a structured array without x, y, z gave numpy's words
+    without the file's name ("mmap length is greater than file size", "no field of name x")."""
+    np.save(tmp_path / "ok.npy", cloud)
+    data = (tmp_path / "ok.npy").read_bytes()
+    cases = {"empty.npy": (b"", "not a NumPy .npy file \\(an empty file\\)"),
+             "text.npy": (b"1 2 3\n4 5 6\n", ".*does not start with the .npy signature"),
+             "cut.npy": (data[:1000], "not a readable .npy file .*truncated")}
+    for name, (body, match) in cases.items():
+        (tmp_path / name).write_bytes(body)
+        with pytest.raises(FileFormatError, match=rf"{name}: {match}.*numpy.save"):
+            open_source(tmp_path / name)
+    np.save(tmp_path / "obj.npy", np.array([{"a": 1}], dtype=object))
+    np.save(tmp_path / "rec.npy", np.zeros(5, dtype=[("a", "f8"), ("b", "f8")]))
+    for name in ("obj.npy", "rec.npy"):
+        with pytest.raises(FileFormatError, match=rf"{name}: .*numpy.save"):
+            open_source(tmp_path / name)
+    from tiledsimplify.cli import main
+    assert main(["simplify", str(tmp_path / "empty.npy"), str(tmp_path / "o.npy"),
+                 "--ratio", "0.5"]) == 2
+    assert not (tmp_path / "o.npy").exists()
+
+
+def test_blank_and_comment_lines_are_not_points(tmp_path, cloud):
+    """Blank lines (a file's last ones, most often; CRLF too) and ``#`` comment lines are
+    skipped, not counted: the count was that of the lines, the reader skipped them, and a
+    ``run`` failed with 'n_total was given as 1005 but the chunks hold 1003 points' (one
+    chunk) or misplaced every later chunk. An empty file has no points (its count was -1)."""
+    rows = [f"{x!r} {y!r} {z!r}" for x, y, z in cloud.tolist()]
+    texts = {"trail.xyz": "\n".join(rows) + "\n\n\n",
+             "mid.xyz": "x y z\n" + "\n".join(rows[:500]) + "\n  \n# a comment\n\n"
+                        + "\n".join(rows[500:]) + "\n",
+             "crlf.txt": "# exported\r\n" + "\r\n".join(rows[:333]) + "\r\n\r\n"
+                         + "\r\n".join(rows[333:]),  # no newline at the end
+             "c.csv": "x,y,z\n" + "\n".join(r.replace(" ", ",") for r in rows) + "\n\n"}
+    for name, text in texts.items():
+        path = tmp_path / name
+        path.write_bytes(text.encode())
+        for chunk in (100, 1003, 10_000):
+            src, xyz = _chunked(path, chunk)
+            assert src.count == len(cloud), name
+            np.testing.assert_array_equal(xyz, cloud)
+            got = np.concatenate([c[1] for p in src.parts(2 * chunk) for c in p()])
+            np.testing.assert_array_equal(got, cloud)
+    bad = tmp_path / "b.xyz"
+    bad.write_text("x y z\n1 2 3\n\n# c\n4 five 6\n")
+    with pytest.raises(FileFormatError, match=r"line 5 \(point 1\): '4 five 6'"):
+        list(open_source(bad, chunk_points=4).chunks())
+    for text in ("", "x y z\n", "\n\n"):
+        (tmp_path / "e.xyz").write_text(text)
+        assert open_source(tmp_path / "e.xyz").count == 0
+
+
+def test_a_run_on_text_with_blank_last_lines_keeps_the_count(tmp_path, cloud):
+    from tiledsimplify.pipeline import run
+    path = tmp_path / "t.xyz"
+    path.write_text("".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in cloud.tolist()) + "\n\n")
+    summary = run(path, tmp_path / "o.npy", count=500)
+    assert summary.n_input == len(cloud) and len(np.load(tmp_path / "o.npy")) == 500
+
+
 @pytest.mark.parametrize("suffix", [".ply", ".xyz", ".npy"])
 def test_non_finite_points_fail_naming_the_file_and_the_point(tmp_path, cloud, suffix):
     bad = cloud.copy()

@@ -216,6 +216,11 @@ def _check_pair(original, simplified, doing, verb):
     a point of either). Returns the two sources."""
     from . import metrics
     sources = open_source(original), open_source(simplified)
+    for path, source, what in ((original, sources[0], "original"),
+                               (simplified, sources[1], "simplified")):
+        if source.count == 0:  # metrics would say "`kept` must contain at least 1 point(s)"
+            raise InputError(f"{path}: the {what} cloud has no points; nothing to measure. "
+                             "Check that it is the file you meant.")
     check_memory(f"{original} and {simplified}", sum(s.count for s in sources),
                  per_point=metrics.EVALUATE_BYTES_PER_POINT + 24, doing=doing,
                  fix=f"{verb} a part: crop both clouds to "
@@ -226,6 +231,9 @@ def _check_pair(original, simplified, doing, verb):
 
 def _report(args):
     from .report import make_report
+    if os.path.exists(args.output) and not os.path.isdir(args.output):
+        raise InputError(f"{args.output}: exists and is not a directory; give -o a directory "
+                         "(new or existing) for the report's files.")
     _check_pair(args.input, args.result, "reporting on", "Report on")
     try:
         elev, azim = (float(v) for v in args.view.split(","))
@@ -425,6 +433,11 @@ def main(argv=None):
     except (KeyboardInterrupt, Stopped) as exc:  # everything on the way cleaned up after it
         signum = getattr(exc, "signum", signal.SIGINT)
         message, code = _stopped_message(args, signum, time.perf_counter() - t0), 128 + signum
+    except Exception as exc:  # a bug: its traceback follows (exit 1), but a pipeline reading
+        # --summary must still learn that the run failed, as for every other failure
+        if args.command == "run" and getattr(args, "summary", None):
+            _failed_summary(args, EXIT_ERROR, f"unexpected error: {type(exc).__name__}: {exc}")
+        raise
     finally:
         for s, h in handlers.items():
             signal.signal(s, h)

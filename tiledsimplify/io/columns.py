@@ -28,7 +28,8 @@ def _ply_columns(path):
     names = [p.name for p in vertex.props]
     if fmt == "ascii":
         body = data[body_start:].decode("ascii", errors="replace").split("\n", vertex.count)
-        table = np.loadtxt(body[:vertex.count], ndmin=2)
+        table = (np.loadtxt(body[:vertex.count], ndmin=2) if vertex.count
+                 else np.empty((0, len(names))))  # loadtxt gives (0, 1): no column past x
         cols = {name: table[:, i] for i, name in enumerate(names)}
     else:
         endian = "<" if fmt == "binary_little_endian" else ">"

@@ -191,18 +191,25 @@ class TextSource:
     """Chunks of an ASCII point file (XYZ/CSV/TXT, or the vertex block of an ASCII PLY).
 
     ``offsets[k]``: the byte where chunk ``k``'s first line starts (found by the scan that
-    opened the file, :func:`_scan_lines`), so a part starts reading there."""
+    opened the file, :func:`_scan_lines` or :func:`_scan_points`), so a part starts reading
+    there; ``lines[k]``: that line's index in the file (0 = the first line), and one more
+    entry, the line after the last point (default: ``skip_lines + k * chunk_points``, a file
+    without blank or comment lines)."""
 
     is_las = False
 
     def __init__(self, path, chunk_points, *, skip_lines, count, delimiter, offsets,
-                 colour=None):
+                 colour=None, lines=None):
         self.files = [Path(path)]
         self.chunk_points = int(chunk_points)
         self._skip = skip_lines
         self._count = int(count)
         self._delimiter = delimiter
         self._offsets = list(offsets)
+        if lines is None:  # no blank or comment lines: point k on line skip_lines + k
+            lines = [skip_lines + k * self.chunk_points for k in range(len(self._offsets))]
+            lines.append(skip_lines + self._count)
+        self._lines = list(lines)  # and, last, the line after the last point
         self._colour = colour  # an ASCII PLY's ((column, type) of red, green, blue)
 
     @property
@@ -221,10 +228,11 @@ class TextSource:
         None: one part), each reading from the byte offset of its first line, so they pickle
         and read independently."""
         path = self.files[0].absolute()
-        return [TextPart(path, self._offsets[lo // self.chunk_points], lo, hi,
-                         self.chunk_points, self._skip, self._delimiter, self._count,
-                         self._colour)
-                for lo, hi in part_ranges(self._count, max_points, self.chunk_points)]
+        c = self.chunk_points
+        return [TextPart(path, self._offsets[lo // c], lo, hi, c,
+                         self._lines[lo // c:-(-hi // c)] + [self._lines[-(-hi // c)]],
+                         self._delimiter, self._count, self._colour)
+                for lo, hi in part_ranges(self._count, max_points, c)]
 
 
 def _scan_lines(path, first, every, count):
@@ -262,14 +270,17 @@ def _scan_lines(path, first, every, count):
 
 class TextPart:
     """Points ``lo`` to ``hi - 1`` of a text point file, read as its :class:`TextSource`'s
-    chunks from byte ``offset``, where line ``skip + lo`` starts (``skip``: the header's lines,
-    for the line numbers of errors); pickles."""
+    chunks from byte ``offset``, where point ``lo`` starts; ``lines``: the file's line index
+    (0-based) of each chunk's first point, and then of the line after the part's last point
+    (line numbers for errors, and where blank or ``#`` comment lines lie between: a chunk of
+    ``m`` points on ``m`` lines is read as it is, else its lines are filtered by
+    :func:`_is_point_line`, as :func:`_scan_points` counted them); pickles."""
 
-    def __init__(self, path, offset, lo, hi, chunk_points, skip, delimiter, count,
+    def __init__(self, path, offset, lo, hi, chunk_points, lines, delimiter, count,
                  colour=None):
         self.path, self.offset = Path(path), int(offset)
         self.lo, self.hi = int(lo), int(hi)
-        self.chunk_points, self.skip = int(chunk_points), int(skip)
+        self.chunk_points, self.lines = int(chunk_points), [int(v) for v in lines]
         self.delimiter, self.count = delimiter, int(count)
         self.colour = colour
 
@@ -284,29 +295,106 @@ class TextPart:
         with open(path, "rb") as raw:
             raw.seek(self.offset)
             fh = io.TextIOWrapper(raw, encoding="ascii", errors="replace")
-            while start < self.hi:
+            for j in itertools.count():
+                if start >= self.hi:
+                    break
                 m = min(self.chunk_points, self.hi - start)
-                lines = list(itertools.islice(fh, m))
+                first, span = self.lines[j], self.lines[j + 1] - self.lines[j]
+                lines = list(itertools.islice(fh, span))
+                numbers = None  # line k of the chunk is the file's line first + k
+                if span != m:  # blank or comment lines among them
+                    numbers = [first + k for k, line in enumerate(lines) if _is_point_line(line)]
+                    lines = [line for line in lines if _is_point_line(line)]
                 if len(lines) < m:
                     raise FileFormatError(f"{path}: expected {self.count} points but the file "
                                           f"ends after {start + len(lines)}; it is truncated.")
                 cols = (0, 1, 2) + tuple(c for c, _ in (self.colour or ()))
                 try:
-                    got = np.loadtxt(lines, delimiter=self.delimiter, usecols=cols,
+                    got = np.loadtxt(lines[:m], delimiter=self.delimiter, usecols=cols,
                                      dtype=np.float64, ndmin=2)
                 except ValueError as exc:
-                    i, text, why = _first_bad_line(lines, self.delimiter)
-                    where = (f"line {self.skip + start + i + 1} (point {start + i}): "
+                    i, text, why = _first_bad_line(lines[:m], self.delimiter)
+                    line = 0 if i is None else first + i if numbers is None else numbers[i]
+                    where = (f"line {line + 1} (point {start + i}): "
                              f"{text.strip()[:80]!r} ({why})" if i is not None
                              else f"the block of points from {start} ({exc})")
                     raise FileFormatError(f"{path}: unreadable point line at {where}; "
                                           "each line needs three numbers x y z; fix or remove "
                                           "it.") from None
+                if len(got) != m:  # a line numpy skips that _is_point_line does not
+                    raise FileFormatError(f"{path}: {m - len(got)} of the lines {first + 1} to "
+                                          f"{first + span} hold no point; remove them.")
                 xyz = np.ascontiguousarray(got[:, :3])
                 attrs = {las: colour_uint16(got[:, 3 + j], code)
                          for j, (las, (_, code)) in enumerate(zip(PLY_COLOURS, self.colour or ()))}
                 yield start, check_finite(xyz, start, [path]), attrs
                 start += m
+
+
+def _is_point_line(line):
+    """A line of a text point file that holds a point: not blank, not a ``#`` comment. What
+    :func:`_scan_points` counts, byte-wise (the same characters are whitespace: ASCII's)."""
+    s = line.lstrip()
+    return bool(s) and s[0] != "#"
+
+
+#: the bytes str.isspace() takes for whitespace in ASCII (a line of only these is blank)
+_BLANK = np.zeros(256, dtype=bool)
+_BLANK[[9, 10, 11, 12, 13, 28, 29, 30, 31, 32]] = True
+
+
+def _scan_points(path, first, every):
+    """One pass over a text point file: ``(count, offsets, lines)``, ``count`` its point lines
+    after its first ``first`` lines (a header): lines neither blank nor a ``#`` comment
+    (:func:`_is_point_line`, which the reader skips the same way; a file's blank last lines
+    are common); ``offsets[k]`` the byte and ``lines[k]`` the line index (0-based) where point
+    ``k * every`` starts, and ``lines[-1]`` the line after the last point. Counting newlines
+    alone counted blank and comment lines as points, and the reader, which skips them, then
+    found fewer points than the count."""
+    count = line_no = base = 0  # points and lines before ``buf``, its first byte in the file
+    offsets, lines, after = [], [], first
+    carry = b""
+    with open(path, "rb") as fh:
+        while True:
+            block = fh.read(1 << 22)
+            buf = carry + block
+            if not buf:
+                break
+            a = np.frombuffer(buf, dtype=np.uint8)
+            ends = np.flatnonzero(a == 10)
+            if block:  # whole lines only: the rest waits for the next block
+                end = int(ends[-1]) + 1 if len(ends) else 0
+            else:  # the end of the file: a last line without a newline
+                end = len(buf)
+                ends = np.append(ends, len(buf))
+            if len(ends):
+                starts = np.concatenate(([0], ends[:-1] + 1))
+                lead = a[np.minimum(starts, end - 1)]  # a line's first byte ("\n": empty)
+                point = ~_BLANK[lead] & (lead != 35)
+                indented = np.flatnonzero(_BLANK[lead] & (lead != 10))  # look past the blanks
+                if len(indented):  # step each over its blanks, all at once
+                    at, moving = starts[indented], np.arange(len(indented))
+                    while len(moving):
+                        c = a[np.minimum(at[moving], end - 1)]
+                        moving = moving[_BLANK[c] & (c != 10) & (at[moving] < end)]
+                        at[moving] += 1
+                    point[indented] = ((at < ends[indented])
+                                       & (a[np.minimum(at, end - 1)] != 35))
+                index = line_no + np.arange(len(starts))
+                point &= index >= first
+                at = np.flatnonzero(point)
+                pick = at[(count + np.arange(len(at))) % every == 0]
+                offsets.extend((base + starts[pick]).tolist())
+                lines.extend(index[pick].tolist())
+                if len(at):
+                    after = int(index[at[-1]]) + 1
+                count += len(at)
+                line_no += len(starts)
+            carry = buf[end:]
+            base += end
+            if not block:
+                break
+    return count, offsets, lines + [after]
 
 
 def _first_bad_line(lines, delimiter):
@@ -337,14 +425,11 @@ def _text_header(path):
 
 
 def _text_layout(path, chunk_points):
-    """(lines to skip, number of points, delimiter, chunk offsets) of an XYZ/CSV/TXT file, by
-    one scan (:func:`_scan_lines`)."""
+    """(lines to skip, number of points, delimiter, chunk offsets, their line indices) of an
+    XYZ/CSV/TXT file, by one scan (:func:`_scan_points`)."""
     skip, delimiter = _text_header(path)
-    n_lines, last, offsets = _scan_lines(path, skip, chunk_points, None)
-    if last not in (b"", b"\n"):
-        n_lines += 1  # a last line without a newline
-    count = n_lines - skip
-    return skip, count, delimiter, offsets[:-(-count // chunk_points)]
+    count, offsets, lines = _scan_points(path, skip, chunk_points)
+    return skip, count, delimiter, offsets, lines
 
 
 def _ply_source(path, chunk_points):
@@ -391,6 +476,24 @@ def _is_las_spec(spec):
     return p.suffix.lower() in (".las", ".laz")
 
 
+def _load_npy(path):
+    """``np.load(path, mmap_mode="r")``, or a :class:`FileFormatError` naming the file, what is
+    wrong and the fix: numpy's own errors for an empty, truncated or non-NPY file name no
+    file ("mmap length is greater than file size"; an empty one raised EOFError, a
+    traceback)."""
+    with open(path, "rb") as fh:
+        magic = fh.read(6)
+    fix = "save the (n, 3) points with numpy.save(path, points)"
+    if magic != b"\x93NUMPY":
+        what = "an empty file" if not magic else "it does not start with the .npy signature"
+        raise FileFormatError(f"{path}: not a NumPy .npy file ({what}); {fix}.")
+    try:
+        return np.load(path, mmap_mode="r")
+    except (ValueError, OSError, EOFError) as exc:
+        raise FileFormatError(f"{path}: not a readable .npy file ({exc}); it may be truncated "
+                              f"or hold Python objects: {fix}.") from None
+
+
 def open_source(spec, chunk_points=1_000_000):
     """A chunked reader for ``spec``: ``.count``, ``.chunks()``, ``.files``, ``.is_las``."""
     from .e57 import E57Source, e57_files
@@ -411,16 +514,16 @@ def open_source(spec, chunk_points=1_000_000):
         if src is not None:
             return src
     if suffix in TEXT_SUFFIXES:
-        skip, count, delimiter, offsets = _text_layout(p, chunk_points)
+        skip, count, delimiter, offsets, lines = _text_layout(p, chunk_points)
         return TextSource(p, chunk_points, skip_lines=skip, count=count, delimiter=delimiter,
-                          offsets=offsets)
+                          offsets=offsets, lines=lines)
     if suffix == ".npy":
-        arr = np.load(p, mmap_mode="r")
+        arr = _load_npy(p)
         mapped = None
-        if arr.dtype.names:  # our own structured output
+        if arr.dtype.names and {"x", "y", "z"} <= set(arr.dtype.names):  # our own output
             arr = np.stack([arr["x"], arr["y"], arr["z"]], axis=1)
-        elif arr.ndim != 2 or arr.shape[1] < 3:
-            arr = read_points(p)
+        elif arr.dtype.names or arr.ndim != 2 or arr.shape[1] < 3 or arr.dtype.kind not in "fiu":
+            arr = read_points(p)  # (n, >3) and the rest, or an error naming what it holds
         elif isinstance(arr, np.memmap) and arr.flags.c_contiguous:
             mapped = (str(p.absolute()), int(arr.offset), arr.dtype, arr.shape)
         return ArraySource(arr, chunk_points, files=[p], mapped=mapped)

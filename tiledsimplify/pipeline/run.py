@@ -707,6 +707,11 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         ts, again = None, False
         if _is_empty_dir(store_path):  # made beforehand (mkdir -p): a new store goes there
             pass
+        elif store_path.exists() and not (store_path / "zarr.json").is_file():
+            what = ("is a directory holding no tile store" if store_path.is_dir()
+                    else "is a file, not a directory")  # TileStore.open said "no tile store at"
+            raise InputError(f"{store_path}: {what}; give --store a new or empty directory, or "
+                             "the store of an earlier run of this command to resume it.")
         elif store_path.exists():
             other = InputError(
                 f"{store_path}: this tile store was made for another input or other settings; "
