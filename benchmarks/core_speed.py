@@ -40,19 +40,11 @@ DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
 def cloud(kind, n):
-    from tiledsimplify.io import read_mesh, read_points
+    from tiledsimplify.io import read_mesh
     from tiledsimplify.synthetic import sample_surface, scan, spacing
     if kind == "bunny":
-        from scipy.spatial.transform import Rotation
-        scans = DATA / "scans" / "stanford_bunny_range"
-        parts = []
-        for line in (scans / "bun.conf").read_text().splitlines():
-            f = line.split()
-            if f and f[0] == "bmesh":
-                t, q = np.array(f[2:5], float), np.array(f[5:9], float)
-                P = read_points(scans / (f[1] + ".gz"))
-                parts.append(Rotation.from_quat(q).inv().apply(P) + t)
-        P = np.vstack(parts)
+        from real_scans import bunny_range
+        P = bunny_range()
         rng = np.random.default_rng(0)
         return P[np.sort(rng.choice(len(P), min(n, len(P)), replace=False))]
     V, F = read_mesh(DATA / "meshes" / "cad_classic" / "fandisk.obj")

@@ -19,7 +19,9 @@ the final setting).
 Cases (``--list``): ``bunny`` (35,947 points, 10 %, paper Fig. 3); ``fandisk`` (evenly sampled to
 16,475 points, 20 %, Fig. 2); every other CAD mesh in ``meshes/`` evenly sampled to ~20k points
 (20 %) and scanned by the project's line scanner with range noise 0.1 and 0.2 x spacing
-(``<part>-scan0.1``, ``<part>-scan0.2``); ``autzen`` (real airborne LiDAR, no edge truth).
+(``<part>-scan0.1``, ``<part>-scan0.2``); ``autzen`` (real airborne LiDAR, no edge truth);
+``bunny-range`` (the Bunny's ten real range scans registered, 362,272 points, 10 %, no edge
+truth: overlapping views, registration residue and scanner noise).
 
     python benchmarks/quality.py --quick                    # bunny, fandisk, fandisk-scan0.1
     python benchmarks/quality.py --cases fandisk,block-scan0.2 --json out.json
@@ -75,7 +77,7 @@ def case_names():
     names = ["bunny", "fandisk"] + [f"fandisk-scan{s}" for s in NOISES]
     for part in PARTS:
         names += [part] + [f"{part}-scan{s}" for s in NOISES]
-    return names + ["autzen"]
+    return names + ["autzen", "bunny-range"]
 
 
 def _groups():
@@ -136,6 +138,11 @@ def load_case(name, n_cad=20_000, lidar_points=None):
     if name == "bunny":
         X = read_points(MESHES / "stanford_bunny" / "bun_zipper.ply.gz")
         return Case(name, f"Stanford Bunny, {len(X):,} points, 10 %", X, 0.1)
+    if name == "bunny-range":
+        from real_scans import bunny_range
+        X = bunny_range()
+        return Case(name, f"Stanford Bunny, ten real range scans registered, {len(X):,} points, "
+                          "10 %, no edge truth", X, 0.1)
     if name == "autzen":
         import laspy
         las = laspy.read(DATA / "lidar" / "autzen_trim.laz")
