@@ -65,14 +65,18 @@ def test_cli_simplifies_and_writes_flags(cloud, tmp_path):
     assert len(t_all) == 1200 and (t_all["simplify_rank"] >= 0).sum() == 900
 
 
-def test_cli_exit_codes(cloud, tmp_path, caplog):
+def test_cli_exit_codes(cloud, tmp_path, caplog, capsys):
     X, path = cloud
     out = tmp_path / "out.ply"
     assert main(["simplify", str(tmp_path / "missing.ply"), str(out), "--ratio", "0.5"]) \
         == EXIT_INPUT
     assert "missing.ply" in caplog.text
-    assert main(["simplify", str(path), str(out), "--ratio", "2"]) == EXIT_INPUT
-    assert "ratio" in caplog.text
+    for bad in ("2", "0", "-0.1", "nan", "half"):  # refused by the parser, naming the option
+        with pytest.raises(SystemExit) as stop:
+            main(["simplify", str(path), str(out), "--ratio", bad])
+        assert stop.value.code == EXIT_INPUT
+        assert "argument --ratio: expected a fraction of the points in (0, 1]" in \
+            capsys.readouterr().err
     bad = tmp_path / "bad.xyz"
     bad.write_text("1 2 3\n4 five 6\n")
     assert main(["simplify", str(bad), str(out), "--ratio", "0.5"]) == EXIT_INPUT
@@ -84,6 +88,9 @@ def test_cli_exit_codes(cloud, tmp_path, caplog):
     assert not (tmp_path / "missing.ply").exists()
     with pytest.raises(SystemExit):
         main(["simplify", str(path), str(out)])  # neither --ratio nor --count
+    assert main(["simplify", str(path), str(tmp_path / "out.laz"), "--ratio", "0.5"]) \
+        == EXIT_INPUT  # LAS/LAZ output is run's: said before any reading
+    assert f"tiledsimplify run {path} {tmp_path / 'out.laz'} --ratio R" in caplog.text
 
 
 def test_counts_read_as_whole_numbers_and_run_settings_are_checked(cloud, tmp_path, caplog,
@@ -110,11 +117,17 @@ def test_counts_read_as_whole_numbers_and_run_settings_are_checked(cloud, tmp_pa
     assert "cuts 1,200 points into about 2 tiles" in caplog.text and len(np.load(out)) == 300
 
 
-def test_cli_evaluate(cloud, tmp_path, capsys, data_dir):
+def test_cli_evaluate(cloud, tmp_path, capsys, caplog, data_dir):
     import json
     X, path = cloud
     out = tmp_path / "k.xyz"
     assert main(["simplify", str(path), str(out), "--ratio", "0.3", "-q"]) == EXIT_OK
+    capsys.readouterr()
+    with caplog.at_level("WARNING", logger="tiledsimplify"):
+        assert main(["evaluate", str(path), str(out), "--json"]) == EXIT_OK
+        assert "swapped" not in caplog.text
+        assert main(["evaluate", str(out), str(path), "--json"]) == EXIT_OK  # swapped: warned
+    assert f"{path} holds more points (1,200) than {out} (360)" in caplog.text
     capsys.readouterr()
     assert main(["evaluate", str(path), str(out), "--json"]) == EXIT_OK
     got = json.loads(capsys.readouterr().out)

@@ -16,6 +16,7 @@ import sys
 import threading
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -23,7 +24,8 @@ from . import __version__, machine
 from .core import SimplifyOptions, compile_cache, simplify_points
 from .core.options import MODES
 from .core.simplify import PEAK_BYTES_PER_POINT
-from .errors import BudgetWarning, InputError, TiledSimplifyError
+from .errors import BudgetWarning, FileFormatError, InputError, TiledSimplifyError
+from .io.las import LAS_SUFFIXES
 from .io.points_out import (
     check_not_input,
     check_output,
@@ -60,6 +62,18 @@ def _stop(signum, frame):
     raise Stopped(signum)
 
 
+def _ratio(text):
+    """A fraction of the points to keep, in (0, 1] (the API's own message names ``ratio=``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value <= 1:
+        raise argparse.ArgumentTypeError(f"expected a fraction of the points in (0, 1], got "
+                                         f"{text!r}; give --count N for a number of points")
+    return value
+
+
 def _count(text):
     """A whole number of points: ``2000000``, ``2_000_000`` or ``2e6``."""
     try:
@@ -91,7 +105,7 @@ def _parser():
                                  "(vertices), XYZ/CSV/TXT or NPY; .gz allowed")
     s.add_argument("output", help="output .ply, .npy, .xyz or .csv")
     g = s.add_mutually_exclusive_group(required=True)
-    g.add_argument("--ratio", type=float, help="fraction of points to keep, in (0, 1]")
+    g.add_argument("--ratio", type=_ratio, help="fraction of points to keep, in (0, 1]")
     g.add_argument("--count", type=_count, help="number of points to keep")
     s.add_argument("--all-points", action="store_true",
                    help="write every input point with its flags and rank, not only the kept")
@@ -116,7 +130,7 @@ def _parser():
                                  "folder or glob; or PLY, XYZ/CSV/TXT, NPY")
     r.add_argument("output", help="output .las/.laz (LAS input), .ply, .npy, .xyz or .csv")
     g = r.add_mutually_exclusive_group()
-    g.add_argument("--ratio", type=float, help="fraction of points to keep, in (0, 1]")
+    g.add_argument("--ratio", type=_ratio, help="fraction of points to keep, in (0, 1]")
     g.add_argument("--count", type=_count, help="number of points to keep")
     r.add_argument("--config", help="TOML file: [run] ratio/count/tile_points/halo/floor/"
                                     "scheduler/workers, [simplify] core options (see "
@@ -221,6 +235,10 @@ def _check_pair(original, simplified, doing, verb):
         if source.count == 0:  # metrics would say "`kept` must contain at least 1 point(s)"
             raise InputError(f"{path}: the {what} cloud has no points; nothing to measure. "
                              "Check that it is the file you meant.")
+    if sources[1].count > sources[0].count:
+        log.warning("%s holds more points (%s) than %s (%s): the original comes first, then "
+                    "the simplified cloud; are they swapped?", simplified,
+                    f"{sources[1].count:,}", original, f"{sources[0].count:,}")
     check_memory(f"{original} and {simplified}", sum(s.count for s in sources),
                  per_point=metrics.EVALUATE_BYTES_PER_POINT + 24, doing=doing,
                  fix=f"{verb} a part: crop both clouds to "
@@ -357,6 +375,11 @@ def _simplify(args):
     extra = {} if args.edge_angle is None else {"edge_angle": args.edge_angle}
     options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
                               detect_boundary=not args.no_boundary, **extra)  # before reading
+    if Path(args.output).suffix.lower() in LAS_SUFFIXES:
+        raise FileFormatError(f"{args.output}: simplify writes .npy, .ply, .xyz, .txt or .csv; "
+                              f"for a LAS/LAZ output that keeps every input dimension use "
+                              f"`tiledsimplify run {args.input} {args.output} --ratio R` (the "
+                              "same algorithm, tile by tile).")
     check_output(args.output)
     check_not_input(args.output, [args.input])
     source = open_source(args.input)
