@@ -773,6 +773,25 @@ def test_a_store_in_use_by_another_run_is_refused(bunny, tmp_path):
     assert s.n_output == round(0.2 * len(X))
 
 
+def test_a_store_in_use_is_refused_however_its_path_is_spelled(bunny, tmp_path):
+    """The lock follows the store's real path: the same store reached through a linked
+    directory, or through a link to the store itself, is refused too (each spelling took a
+    lock of its own, and two runs wrote the same tiles: one then failed with ``tile 9 has no
+    finished result yet``)."""
+    from tiledsimplify.pipeline.run import _exclusive
+    X, path = bunny
+    (tmp_path / "real").mkdir()
+    store = tmp_path / "real" / "s.zarr"
+    store.mkdir()  # made beforehand (mkdir -p): a new store goes there
+    (tmp_path / "linked").symlink_to(tmp_path / "real")
+    (tmp_path / "real" / "t.zarr").symlink_to(store)
+    with _exclusive(store):  # as a run in another process would hold it
+        for other in (tmp_path / "linked" / "s.zarr", tmp_path / "real" / "t.zarr"):
+            with pytest.raises(InputError, match=r"another run is using this tile store"):
+                run(path, tmp_path / "o.npy", ratio=0.2, store=other, tile_points=3000)
+    assert not any(store.iterdir()) and not (tmp_path / "o.npy").exists()
+
+
 def test_a_stopped_stage_ends_its_worker_processes():
     # the "processes" scheduler's pool is ours: a stop terminates its processes instead of
     # waiting for the tiles running in them (dask's own pool waited: 42 s on a 3M-point scan)

@@ -363,9 +363,18 @@ def _exclusive(store_path):
     except ImportError:  # not on a POSIX system: no lock
         yield
         return
-    lock = store_path.with_name(f".{store_path.name}.lock")
-    lock.parent.mkdir(parents=True, exist_ok=True)
-    with open(lock, "a+") as fh:
+    # beside the store's real path: one store spelled through a symlink (``/scratch`` ->
+    # ``/lustre/scratch``, a link to the store) must not get a second lock of its own
+    real = store_path.resolve()
+    lock = real.with_name(f".{real.name}.lock")
+    try:
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        fh = open(lock, "a+")  # noqa: SIM115 - closed below
+    except PermissionError:  # a linked store whose real parent is not ours: as before
+        lock = store_path.with_name(f".{store_path.name}.lock")
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        fh = open(lock, "a+")  # noqa: SIM115
+    with fh:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
