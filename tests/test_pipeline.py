@@ -760,6 +760,18 @@ def test_an_unreachable_scheduler_fails_before_any_work(bunny, tmp_path):
     assert not store.exists() and not (tmp_path / "out.npy").exists()
 
 
+@pytest.mark.parametrize("scheduler", ["127.0.0.1:8786", "thread", "tls://127.0.0.1:8786"])
+def test_an_unknown_scheduler_fails_before_the_ingest(bunny, tmp_path, caplog, scheduler):
+    # it failed at the first tile stage, after the whole input was tiled (90 s at 100M points)
+    X, path = bunny
+    store = tmp_path / "store.zarr"
+    with caplog.at_level("INFO", logger="tiledsimplify"), pytest.raises(
+            InputError, match=r"scheduler must be one of .* or tcp://HOST:PORT, got "):
+        run(path, tmp_path / "out.npy", ratio=0.2, scheduler=scheduler, store=store)
+    assert "ingest" not in caplog.text
+    assert not store.exists() and not (tmp_path / "out.npy").exists()
+
+
 def test_a_store_in_use_by_another_run_is_refused(bunny, tmp_path):
     from tiledsimplify.pipeline.run import _exclusive
     X, path = bunny

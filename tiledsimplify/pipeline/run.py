@@ -666,6 +666,10 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"{input}: the input has no points; nothing to simplify. Check that it "
                          "is the file (or glob) you meant.")
     target = resolve_target(n, ratio, count)
+    if client is None and not (scheduler in SCHEDULERS or (
+            isinstance(scheduler, str) and scheduler.startswith("tcp://"))):
+        raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, "
+                         f"got {scheduler!r}.")  # before the ingest, not at the first stage
     if not 0.0 < float(floor) < 1.0:
         raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
                          f"first runs down to), got {floor!r}; the default is 0.5.")
