@@ -257,6 +257,27 @@ def test_a_failed_run_still_writes_its_summary(tmp_path):
         "exit_code": EXIT_INPUT, "error": f"{missing}: file not found. Check the path."}
 
 
+def test_an_unforeseen_failure_still_writes_its_summary(cloud, tmp_path, monkeypatch):
+    """An error no handler foresaw (a bug, a dask error such as a lost scheduler's) keeps its
+    traceback and exit code 1, and the summary says so: it was not written, so a pipeline read
+    the summary of the run before, exit code 0, for a run that failed."""
+    import json
+
+    import tiledsimplify.pipeline
+    X, path = cloud
+    summary = tmp_path / "run.json"
+    summary.write_text(json.dumps({"exit_code": 0}))  # an earlier run's
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("something unforeseen")
+    monkeypatch.setattr(tiledsimplify.pipeline, "run", broken)
+    with pytest.raises(RuntimeError, match="something unforeseen"):
+        main(["run", str(path), str(tmp_path / "o.npy"), "--ratio", "0.25",
+              "--summary", str(summary), "-q"])
+    got = json.loads(summary.read_text())
+    assert got["exit_code"] == 1 and got["error"] == "RuntimeError: something unforeseen"
+
+
 @pytest.mark.parametrize("name, resumable", [("SIGTERM", False), ("SIGINT", True)])
 def test_a_stopped_run_cleans_up_says_how_to_go_on_and_resumes(tmp_path, name, resumable):
     """SIGTERM (a scheduler's timeout, a cancelled job) stops a run as Ctrl-C does: no output,

@@ -416,6 +416,11 @@ def main(argv=None):
     except (KeyboardInterrupt, Stopped) as exc:  # everything on the way cleaned up after it
         signum = getattr(exc, "signum", signal.SIGINT)
         message, code = _stopped_message(args, signum, time.perf_counter() - t0), 128 + signum
+    except Exception as exc:  # unforeseen (a bug, a dask error): the traceback, exit 1, and a
+        # pipeline reading --summary still learns that the run failed, and why
+        if args.command == "run" and getattr(args, "summary", None):
+            _failed_summary(args, EXIT_ERROR, f"{type(exc).__name__}: {exc}")
+        raise
     finally:
         for s, h in handlers.items():
             signal.signal(s, h)
