@@ -772,6 +772,35 @@ def test_an_unknown_scheduler_fails_before_the_ingest(bunny, tmp_path, caplog, s
     assert not store.exists() and not (tmp_path / "out.npy").exists()
 
 
+def test_a_lost_scheduler_is_an_error_saying_how_to_go_on(bunny, tmp_path, cluster,
+                                                         monkeypatch):
+    # distributed cancels every future when the client loses its scheduler: that was a
+    # traceback (FutureCancelledError is no error of ours), and so no --summary was written
+    import importlib
+
+    from distributed.client import FutureCancelledError
+
+    from tiledsimplify.errors import TiledSimplifyError
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    X, path = bunny
+    store = tmp_path / "s.zarr"
+
+    def lost(*args, **kwargs):
+        raise FutureCancelledError("tile-piece-3", "scheduler-connection-lost")
+    monkeypatch.setattr(R, "_write_output", lost)
+    with pytest.raises(TiledSimplifyError, match=r"the connection to the dask scheduler was "
+                                                 r"lost during the run; no output written\. The "
+                                                 r"finished tiles stay in .*s\.zarr"):
+        run(path, tmp_path / "o.npy", ratio=0.2, client=cluster, store=store, tile_points=3000)
+    assert not (tmp_path / "o.npy").exists()
+
+    def other(*args, **kwargs):  # any other cancellation is not taken for a lost scheduler
+        raise FutureCancelledError("tile-piece-3", "unknown")
+    monkeypatch.setattr(R, "_write_output", other)
+    with pytest.raises(FutureCancelledError):
+        run(path, tmp_path / "o.npy", ratio=0.2, client=cluster, store=store, tile_points=3000)
+
+
 def test_a_store_in_use_by_another_run_is_refused(bunny, tmp_path):
     from tiledsimplify.pipeline.run import _exclusive
     X, path = bunny

@@ -10,6 +10,7 @@ finished tiles are not recomputed, and the output is rewritten from the stored r
 """
 
 import collections
+import concurrent.futures
 import contextlib
 import dataclasses
 import hashlib
@@ -838,6 +839,17 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         stage("refine")
         n_out, n_boundary = _write_output(ts, source, output, prefix, refined, client)
         stage("output")
+    except concurrent.futures.CancelledError as exc:  # distributed's FutureCancelledError
+        if client is None or getattr(exc, "reason", None) != "scheduler-connection-lost":
+            raise
+        # was a traceback (and, being no error of ours, no --summary for a pipeline to read)
+        address = getattr(client.scheduler, "address", None) or "the dask scheduler"
+        raise TiledSimplifyError(
+            f"{address}: the connection to the dask scheduler was lost during the run; no "
+            "output written. " + (
+                "Give --store DIR to make a long run resumable." if store is None else
+                f"The finished tiles stay in {store_path}: run the same command once the "
+                "scheduler is back to go on from them.")) from None
     finally:
         held.close()
     seconds["total"] = time.perf_counter() - t_start
