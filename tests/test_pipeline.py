@@ -1,6 +1,8 @@
 """The tiled pipeline: exact global count, agreement with the untiled core, the same output for
 every scheduler, resume, LAS/LAZ end to end, and the command line."""
 
+from pathlib import Path
+
 import laspy
 import numpy as np
 import pytest
@@ -799,6 +801,31 @@ def test_a_lost_scheduler_is_an_error_saying_how_to_go_on(bunny, tmp_path, clust
     monkeypatch.setattr(R, "_write_output", other)
     with pytest.raises(FutureCancelledError):
         run(path, tmp_path / "o.npy", ratio=0.2, client=cluster, store=store, tile_points=3000)
+
+
+def test_a_store_that_cannot_be_written_fails_before_the_ingest(bunny, tmp_path, caplog,
+                                                               monkeypatch):
+    # a store directory made beforehand but not writable failed after the ingest's first pass
+    # over the input, with "…/store: Operation not permitted." (exit 1)
+    import importlib
+    import os
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    X, path = bunny
+    store = tmp_path / "made" / "s.zarr"
+    store.mkdir(parents=True)
+    locked = {store, tmp_path / "made"}  # as for another user (the root of a test bypasses modes)
+    access = os.access
+    monkeypatch.setattr(R.os, "access", lambda p, mode: Path(p) not in locked
+                        and access(p, mode))
+    for where, bad in ((store, store), (store / "deeper", store),
+                       (tmp_path / "made" / "t", tmp_path / "made")):
+        with caplog.at_level("INFO", logger="tiledsimplify"), pytest.raises(
+                InputError, match=rf"{where.name}: the tile store's directory {bad} is not "
+                                  r"writable; give --store a directory you can write to"):
+            run(path, tmp_path / "o.npy", ratio=0.2, store=where, tile_points=3000)
+        assert "ingest" not in caplog.text and not (tmp_path / "o.npy").exists()
+    with pytest.raises(InputError, match=r"bunny.npy: is a file, not a tile store directory"):
+        run(path, tmp_path / "o.npy", ratio=0.2, store=path, tile_points=3000)
 
 
 def test_a_store_in_use_by_another_run_is_refused(bunny, tmp_path):

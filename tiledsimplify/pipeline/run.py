@@ -390,6 +390,21 @@ def _exclusive(store_path):
         yield
 
 
+def _check_store_writable(store_path):
+    """A ``--store`` this process cannot write is an error before any work: a store directory
+    made beforehand but not writable failed after the ingest's first pass over the input
+    (``…/store: Operation not permitted.``, exit 1), a resumed one at its first tile."""
+    where = next((p for p in (store_path, *store_path.parents) if p.exists()), None)
+    if where is not None and not where.is_dir():
+        if where == store_path:
+            raise InputError(f"{store_path}: is a file, not a tile store directory; give "
+                             "--store a directory.")
+        return  # a file on the way: the lock's mkdir names it
+    if where is not None and not os.access(where, os.W_OK | os.X_OK):
+        raise InputError(f"{store_path}: the tile store's directory {where} is not writable; "
+                         "give --store a directory you can write to.")
+
+
 def _connect(address):
     """A dask.distributed client of the scheduler at ``address``, or an error saying how to
     start one: checked before any work, so a wrong address does not fail after the ingest."""
@@ -712,6 +727,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 tempfile.TemporaryDirectory(prefix="tiledsimplify-"))) / "store.zarr"
         else:  # absolute: workers elsewhere (another directory, another machine) open it
             store_path = Path(store).absolute()
+            _check_store_writable(store_path)
             held.enter_context(_exclusive(store_path))
         if client is not None:  # before the ingest: can every worker reach the store?
             log.info("%d dask worker(s) at %s can use %s", check_workers(
