@@ -762,6 +762,37 @@ def test_an_unreachable_scheduler_fails_before_any_work(bunny, tmp_path):
     assert not store.exists() and not (tmp_path / "out.npy").exists()
 
 
+def test_an_address_where_no_scheduler_speaks_fails_in_bounded_time(bunny, tmp_path,
+                                                                    monkeypatch):
+    # dask's client waited forever on a port where something else listens (the dashboard's
+    # 8787 given for the scheduler's 8786: a run hung, silent, for minutes and on)
+    import http.server
+    import importlib
+    import threading
+    import time
+
+    import dask
+    from tiledsimplify.errors import TiledSimplifyError
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    monkeypatch.setattr(R, "CONNECT_SLACK", 1.0)
+    X, path = bunny
+    store = tmp_path / "store.zarr"
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0),
+                                             http.server.BaseHTTPRequestHandler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    address = f"tcp://127.0.0.1:{server.server_address[1]}"
+    try:
+        t = time.perf_counter()
+        with dask.config.set({"distributed.comm.timeouts.connect": "1s"}), pytest.raises(
+                TiledSimplifyError, match=rf"{address}: no dask scheduler answered within 2 s, "
+                                          r"though something accepts connections there"):
+            run(path, tmp_path / "out.npy", ratio=0.2, scheduler=address, store=store)
+        assert time.perf_counter() - t < 30
+    finally:
+        server.shutdown()
+    assert not store.exists() and not (tmp_path / "out.npy").exists()
+
+
 @pytest.mark.parametrize("scheduler", ["127.0.0.1:8786", "thread", "tls://127.0.0.1:8786"])
 def test_an_unknown_scheduler_fails_before_the_ingest(bunny, tmp_path, caplog, scheduler):
     # it failed at the first tile stage, after the whole input was tiled (90 s at 100M points)

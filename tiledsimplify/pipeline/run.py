@@ -405,17 +405,46 @@ def _check_store_writable(store_path):
                          "give --store a directory you can write to.")
 
 
+#: seconds beyond dask's connect timeout (``distributed.comm.timeouts.connect``) that a run
+#: waits for a scheduler's address to answer: dask's client waits forever on a port where
+#: something else listens (the dashboard's, 8787, for the scheduler's 8786: 4 min and on)
+CONNECT_SLACK = 10.0
+
+
 def _connect(address):
     """A dask.distributed client of the scheduler at ``address``, or an error saying how to
     start one: checked before any work, so a wrong address does not fail after the ingest."""
+    import threading
+
+    from dask.utils import parse_timedelta
     from distributed import Client
-    try:
-        return Client(address)
-    except (OSError, TimeoutError) as exc:
+    got = {}
+
+    def connect():
+        try:
+            got["client"] = Client(address)
+        except BaseException as exc:  # noqa: BLE001 - raised below, in the caller's thread
+            got["error"] = exc
+    limit = parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"), "s") \
+        + CONNECT_SLACK
+    thread = threading.Thread(target=connect, name="tiledsimplify-connect", daemon=True)
+    thread.start()
+    thread.join(limit)
+    if thread.is_alive():  # something listens there, but not a dask scheduler
+        raise TiledSimplifyError(
+            f"{address}: no dask scheduler answered within {limit:.0f} s, though something "
+            "accepts connections there (the dashboard's port, 8787 by default, rather than the "
+            "scheduler's, 8786?). Give the address `dask scheduler` prints (\"Scheduler at: "
+            "tcp://…\"); --scheduler threads runs on this machine alone.")
+    exc = got.get("error")
+    if isinstance(exc, (OSError, TimeoutError)):
         raise TiledSimplifyError(
             f"{address}: no dask scheduler answered ({exc}). Start one (`dask scheduler`, then "
             f"`dask worker {address}` on each machine) or give the address it prints; "
             "--scheduler threads runs on this machine alone.") from None
+    if exc is not None:
+        raise exc
+    return got["client"]
 
 
 def _start_compile(client, scheduler, workers):
