@@ -891,6 +891,46 @@ def test_a_store_in_use_is_refused_however_its_path_is_spelled(bunny, tmp_path):
     assert not any(store.iterdir()) and not (tmp_path / "o.npy").exists()
 
 
+@pytest.mark.skipif(not __import__("sys").platform.startswith("linux"), reason="prctl")
+def test_a_killed_run_leaves_no_worker_processes(tmp_path):
+    # SIGKILL (the OOM killer, a batch system past its grace period) gives no stage a chance
+    # to end its pool: its processes lived on as orphans, ran every queued tile into the store
+    # and then idled; now they end with the run
+    import os
+    import subprocess
+    import sys
+    import time
+    script = tmp_path / "killed.py"
+    script.write_text(
+        "import importlib, os, signal, time\n"
+        "R = importlib.import_module('tiledsimplify.pipeline.run')\n"
+        "if __name__ == '__main__':\n"
+        "    with R._process_pool(2) as pool:\n"
+        "        jobs = [pool.submit(time.sleep, 120) for _ in range(4)]\n"
+        "        time.sleep(2)\n"
+        "        print(' '.join(str(p) for p in pool._processes), flush=True)\n"
+        "        os.kill(os.getpid(), signal.SIGKILL)\n")
+    with open(tmp_path / "pids", "w") as out:  # a file: survivors would hold a pipe open
+        got = subprocess.run([sys.executable, str(script)], stdout=out, timeout=120)
+    assert got.returncode == -9
+    pids = [int(p) for p in (tmp_path / "pids").read_text().split()]
+    assert len(pids) == 2
+
+    def alive(pid):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+    t = time.perf_counter()
+    while any(alive(p) for p in pids) and time.perf_counter() - t < 20:
+        time.sleep(0.1)
+    left = [p for p in pids if alive(p)]
+    for p in left:  # not to leave them to the machine when this fails
+        os.kill(p, 9)
+    assert not left
+
+
 def test_a_stopped_stage_ends_its_worker_processes():
     # the "processes" scheduler's pool is ours: a stop terminates its processes instead of
     # waiting for the tiles running in them (dask's own pool waited: 42 s on a 3M-point scan)

@@ -506,6 +506,25 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
         report.close()
 
 
+def _pool_process():
+    """Initializer of a :func:`_process_pool` process: dask's, and on Linux the process ends
+    with its parent (``PR_SET_PDEATHSIG``). A run killed outright (SIGKILL: the OOM killer, a
+    batch system past its grace period) left its pool's processes behind, orphaned: they ran
+    every queued tile on, writing into the store no run held, and then idled on."""
+    from dask.multiprocessing import initialize_worker_process
+    initialize_worker_process()
+    if sys.platform.startswith("linux"):
+        parent = os.getppid()  # the run's process (or a forkserver: then its death counts)
+        try:
+            import ctypes
+            import signal
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
+        except (OSError, AttributeError):  # no prctl to call: as before
+            return
+        if os.getppid() != parent:  # the parent died before prctl
+            os._exit(1)
+
+
 @contextlib.contextmanager
 def _process_pool(workers):
     """The pool of the "processes" scheduler, made as dask makes its own (a
@@ -516,11 +535,11 @@ def _process_pool(workers):
     42 s (3M-point scan, 2 processes)."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from dask.multiprocessing import get_context, initialize_worker_process
+    from dask.multiprocessing import get_context
     if os.environ.get("PYTHONHASHSEED") in (None, "0"):
         os.environ["PYTHONHASHSEED"] = "6640"  # as dask sets it for the pools it makes
     pool = ProcessPoolExecutor(workers or machine.cpus(), mp_context=get_context(),
-                               initializer=initialize_worker_process)
+                               initializer=_pool_process)
     try:
         yield pool
     except BaseException:
