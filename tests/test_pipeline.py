@@ -749,6 +749,23 @@ def test_a_target_of_zero_points_keeps_none_without_a_refinement_warning(tmp_pat
     assert not [r for r in caplog.records if r.levelname == "WARNING"]
 
 
+def test_a_killed_runs_temporary_files_are_named(tmp_path, caplog):
+    # SIGKILL while writing the output left .NAME.*.partial (and .records for text) beside it,
+    # as large as the output, and a rerun said nothing of them
+    path = tmp_path / "few.npy"
+    np.save(path, np.random.default_rng(3).random((40, 3)))
+    for name in (".out.xyz.ab12cd.partial", ".out.xyz.ef34gh.records", ".other.xyz.x.partial"):
+        (tmp_path / name).write_bytes(b"\0" * 1000)
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        run(path, tmp_path / "out.xyz", ratio=0.5, workers=1, progress=False)
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert warned == [f"{tmp_path / 'out.xyz'}: 2 temporary file(s) of an earlier run that was "
+                      "killed while writing it take 0.0 MB beside it (.out.xyz.ab12cd.partial, "
+                      ".out.xyz.ef34gh.records); delete them unless another run is writing "
+                      "out.xyz now."]
+    assert (tmp_path / ".out.xyz.ab12cd.partial").exists()  # not ours to delete
+
+
 def test_an_unreachable_scheduler_fails_before_any_work(bunny, tmp_path):
     import dask
     from tiledsimplify.errors import TiledSimplifyError

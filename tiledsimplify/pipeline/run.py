@@ -740,6 +740,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     check_output(output, LAS_SUFFIXES)
     check_not_input(output, source.files)
     _warn_read_back(input, output, source)
+    _warn_leftovers(output)
     _check_layout(output, source)
     _check_room(output, target * _record_bytes(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
@@ -1009,6 +1010,25 @@ def _warn_read_back(input, output, source):
             log.warning("%s: the output goes where the input %s names its files; a later run "
                         "on the same input will read it as one more input file. Write it to "
                         "another folder.", output, input)
+
+
+def _warn_leftovers(output):
+    """Warn of the temporary files a killed run writing ``output`` left beside it: the
+    output's ``.NAME.*.partial`` and a text output's ``.NAME.*.records`` are removed when a run
+    fails or is stopped, but not after SIGKILL (the OOM killer, a batch system past its grace
+    period), and a rerun wrote new ones beside them: a killed run's kept points, whole, per
+    file. Not deleted here: another run may be writing the same output."""
+    try:
+        left = sorted(p for pattern in (f".{output.name}.*.partial", f".{output.name}.*.records")
+                      for p in output.parent.glob(pattern) if p.is_file())
+    except OSError:
+        return
+    if left:
+        size = sum(p.stat().st_size for p in left)
+        log.warning("%s: %d temporary file(s) of an earlier run that was killed while writing "
+                    "it take %.1f MB beside it (%s); delete them unless another run is writing "
+                    "%s now.", output, len(left), size / 1e6, ", ".join(p.name for p in left),
+                    output.name)
 
 
 def _check_layout(output, source):
