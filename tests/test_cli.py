@@ -281,23 +281,25 @@ def test_evaluate_an_empty_cloud_names_the_file(cloud, tmp_path, caplog):
     assert "empty.xyz: the original cloud has no points" in caplog.text
 
 
-def test_a_run_failing_unexpectedly_still_writes_its_summary(cloud, tmp_path, monkeypatch):
-    """An exception that is no TiledSimplifyError/OSError (a bug; before the NPY fix, an empty
-    .npy's EOFError) left the traceback and no --summary at all, though a pipeline reads the
-    summary to learn how the run ended: it now says exit 1 and the error, then re-raises."""
+def test_an_unforeseen_failure_still_writes_its_summary(cloud, tmp_path, monkeypatch):
+    """An error no handler foresaw (a bug, a dask error such as a lost scheduler's) keeps its
+    traceback and exit code 1, and the summary says so: it was not written, so a pipeline read
+    the summary of the run before, exit code 0, for a run that failed."""
     import json
 
-    import tiledsimplify.pipeline as pipeline
+    import tiledsimplify.pipeline
+    _, path = cloud
+    summary = tmp_path / "run.json"
+    summary.write_text(json.dumps({"exit_code": 0}))  # an earlier run's
 
     def broken(*args, **kwargs):
-        raise RuntimeError("boom")
-    monkeypatch.setattr(pipeline, "run", broken)
-    summary = tmp_path / "run.json"
-    with pytest.raises(RuntimeError, match="boom"):
-        main(["run", str(cloud[1]), str(tmp_path / "o.npy"), "--ratio", "0.25",
+        raise RuntimeError("something unforeseen")
+    monkeypatch.setattr(tiledsimplify.pipeline, "run", broken)
+    with pytest.raises(RuntimeError, match="something unforeseen"):
+        main(["run", str(path), str(tmp_path / "o.npy"), "--ratio", "0.25",
               "--summary", str(summary), "-q"])
     got = json.loads(summary.read_text())
-    assert got["exit_code"] == 1 and got["error"] == "unexpected error: RuntimeError: boom"
+    assert got["exit_code"] == 1 and got["error"] == "unexpected error: RuntimeError: something unforeseen"
 
 
 @pytest.mark.parametrize("name, resumable", [("SIGTERM", False), ("SIGINT", True)])

@@ -1,6 +1,8 @@
 """The tiled pipeline: exact global count, agreement with the untiled core, the same output for
 every scheduler, resume, LAS/LAZ end to end, and the command line."""
 
+from pathlib import Path
+
 import laspy
 import numpy as np
 import pytest
@@ -747,8 +749,26 @@ def test_a_target_of_zero_points_keeps_none_without_a_refinement_warning(tmp_pat
     assert not [r for r in caplog.records if r.levelname == "WARNING"]
 
 
+def test_a_killed_runs_temporary_files_are_named(tmp_path, caplog):
+    # SIGKILL while writing the output left .NAME.*.partial (and .records for text) beside it,
+    # as large as the output, and a rerun said nothing of them
+    path = tmp_path / "few.npy"
+    np.save(path, np.random.default_rng(3).random((40, 3)))
+    for name in (".out.xyz.ab12cd.partial", ".out.xyz.ef34gh.records", ".other.xyz.x.partial"):
+        (tmp_path / name).write_bytes(b"\0" * 1000)
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        run(path, tmp_path / "out.xyz", ratio=0.5, workers=1, progress=False)
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert warned == [(f"{tmp_path / 'out.xyz'}: 2 temporary file(s) of an earlier run that "
+                       "was killed while writing it take 0.0 MB beside it "
+                       "(.out.xyz.ab12cd.partial, .out.xyz.ef34gh.records); delete them unless "
+                       "another run is writing out.xyz now.")]
+    assert (tmp_path / ".out.xyz.ab12cd.partial").exists()  # not ours to delete
+
+
 def test_an_unreachable_scheduler_fails_before_any_work(bunny, tmp_path):
     import dask
+
     from tiledsimplify.errors import TiledSimplifyError
     X, path = bunny
     store = tmp_path / "store.zarr"
@@ -758,6 +778,104 @@ def test_an_unreachable_scheduler_fails_before_any_work(bunny, tmp_path):
             run(path, tmp_path / "out.npy", ratio=0.2, scheduler="tcp://127.0.0.1:9",
                 store=store)
     assert not store.exists() and not (tmp_path / "out.npy").exists()
+
+
+def test_an_address_where_no_scheduler_speaks_fails_in_bounded_time(bunny, tmp_path,
+                                                                    monkeypatch):
+    # dask's client waited forever on a port where something else listens (the dashboard's
+    # 8787 given for the scheduler's 8786: a run hung, silent, for minutes and on)
+    import http.server
+    import importlib
+    import threading
+    import time
+
+    import dask
+
+    from tiledsimplify.errors import TiledSimplifyError
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    monkeypatch.setattr(R, "CONNECT_SLACK", 1.0)
+    _, path = bunny
+    store = tmp_path / "store.zarr"
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0),
+                                             http.server.BaseHTTPRequestHandler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    address = f"tcp://127.0.0.1:{server.server_address[1]}"
+    try:
+        t = time.perf_counter()
+        with dask.config.set({"distributed.comm.timeouts.connect": "1s"}), pytest.raises(
+                TiledSimplifyError, match=rf"{address}: no dask scheduler answered within 2 s, "
+                                          r"though something accepts connections there"):
+            run(path, tmp_path / "out.npy", ratio=0.2, scheduler=address, store=store)
+        assert time.perf_counter() - t < 30
+    finally:
+        server.shutdown()
+    assert not store.exists() and not (tmp_path / "out.npy").exists()
+
+
+@pytest.mark.parametrize("scheduler", ["127.0.0.1:8786", "thread", "tls://127.0.0.1:8786"])
+def test_an_unknown_scheduler_fails_before_the_ingest(bunny, tmp_path, caplog, scheduler):
+    # it failed at the first tile stage, after the whole input was tiled (90 s at 100M points)
+    _, path = bunny
+    store = tmp_path / "store.zarr"
+    with caplog.at_level("INFO", logger="tiledsimplify"), pytest.raises(
+            InputError, match=r"scheduler must be one of .* or tcp://HOST:PORT, got "):
+        run(path, tmp_path / "out.npy", ratio=0.2, scheduler=scheduler, store=store)
+    assert "ingest" not in caplog.text
+    assert not store.exists() and not (tmp_path / "out.npy").exists()
+
+
+def test_a_lost_scheduler_is_an_error_saying_how_to_go_on(bunny, tmp_path, cluster,
+                                                         monkeypatch):
+    # distributed cancels every future when the client loses its scheduler: that was a
+    # traceback (FutureCancelledError is no error of ours), and so no --summary was written
+    import importlib
+
+    from distributed.client import FutureCancelledError
+
+    from tiledsimplify.errors import TiledSimplifyError
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    _, path = bunny
+    store = tmp_path / "s.zarr"
+
+    def lost(*args, **kwargs):
+        raise FutureCancelledError("tile-piece-3", "scheduler-connection-lost")
+    monkeypatch.setattr(R, "_write_output", lost)
+    with pytest.raises(TiledSimplifyError, match=r"the connection to the dask scheduler was "
+                                                 r"lost during the run; no output written\. The "
+                                                 r"finished tiles stay in .*s\.zarr"):
+        run(path, tmp_path / "o.npy", ratio=0.2, client=cluster, store=store, tile_points=3000)
+    assert not (tmp_path / "o.npy").exists()
+
+    def other(*args, **kwargs):  # any other cancellation is not taken for a lost scheduler
+        raise FutureCancelledError("tile-piece-3", "unknown")
+    monkeypatch.setattr(R, "_write_output", other)
+    with pytest.raises(FutureCancelledError):
+        run(path, tmp_path / "o.npy", ratio=0.2, client=cluster, store=store, tile_points=3000)
+
+
+def test_a_store_that_cannot_be_written_fails_before_the_ingest(bunny, tmp_path, caplog,
+                                                               monkeypatch):
+    # a store directory made beforehand but not writable failed after the ingest's first pass
+    # over the input, with "…/store: Operation not permitted." (exit 1)
+    import importlib
+    import os
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    _, path = bunny
+    store = tmp_path / "made" / "s.zarr"
+    store.mkdir(parents=True)
+    locked = {store, tmp_path / "made"}  # as for another user (the root of a test bypasses modes)
+    access = os.access
+    monkeypatch.setattr(R.os, "access", lambda p, mode: Path(p) not in locked
+                        and access(p, mode))
+    for where, bad in ((store, store), (store / "deeper", store),
+                       (tmp_path / "made" / "t", tmp_path / "made")):
+        with caplog.at_level("INFO", logger="tiledsimplify"), pytest.raises(
+                InputError, match=rf"{where.name}: the tile store's directory {bad} is not "
+                                  r"writable; give --store a directory you can write to"):
+            run(path, tmp_path / "o.npy", ratio=0.2, store=where, tile_points=3000)
+        assert "ingest" not in caplog.text and not (tmp_path / "o.npy").exists()
+    with pytest.raises(InputError, match=r"bunny.npy: is a file, not a tile store directory"):
+        run(path, tmp_path / "o.npy", ratio=0.2, store=path, tile_points=3000)
 
 
 def test_a_store_in_use_by_another_run_is_refused(bunny, tmp_path):
@@ -771,6 +889,66 @@ def test_a_store_in_use_by_another_run_is_refused(bunny, tmp_path):
         assert not store.exists() and not (tmp_path / "o.npy").exists()
     s = run(path, tmp_path / "o.npy", ratio=0.2, store=store, tile_points=3000)  # released
     assert s.n_output == round(0.2 * len(X))
+
+
+def test_a_store_in_use_is_refused_however_its_path_is_spelled(bunny, tmp_path):
+    """The lock follows the store's real path: the same store reached through a linked
+    directory, or through a link to the store itself, is refused too (each spelling took a
+    lock of its own, and two runs wrote the same tiles: one then failed with ``tile 9 has no
+    finished result yet``)."""
+    from tiledsimplify.pipeline.run import _exclusive
+    _, path = bunny
+    (tmp_path / "real").mkdir()
+    store = tmp_path / "real" / "s.zarr"
+    store.mkdir()  # made beforehand (mkdir -p): a new store goes there
+    (tmp_path / "linked").symlink_to(tmp_path / "real")
+    (tmp_path / "real" / "t.zarr").symlink_to(store)
+    with _exclusive(store):  # as a run in another process would hold it
+        for other in (tmp_path / "linked" / "s.zarr", tmp_path / "real" / "t.zarr"):
+            with pytest.raises(InputError, match=r"another run is using this tile store"):
+                run(path, tmp_path / "o.npy", ratio=0.2, store=other, tile_points=3000)
+    assert not any(store.iterdir()) and not (tmp_path / "o.npy").exists()
+
+
+@pytest.mark.skipif(not __import__("sys").platform.startswith("linux"), reason="prctl")
+def test_a_killed_run_leaves_no_worker_processes(tmp_path):
+    # SIGKILL (the OOM killer, a batch system past its grace period) gives no stage a chance
+    # to end its pool: its processes lived on as orphans, ran every queued tile into the store
+    # and then idled; now they end with the run
+    import os
+    import subprocess
+    import sys
+    import time
+    script = tmp_path / "killed.py"
+    script.write_text(
+        "import importlib, os, signal, time\n"
+        "R = importlib.import_module('tiledsimplify.pipeline.run')\n"
+        "if __name__ == '__main__':\n"
+        "    with R._process_pool(2) as pool:\n"
+        "        jobs = [pool.submit(time.sleep, 120) for _ in range(4)]\n"
+        "        time.sleep(2)\n"
+        "        print(' '.join(str(p) for p in pool._processes), flush=True)\n"
+        "        os.kill(os.getpid(), signal.SIGKILL)\n")
+    with open(tmp_path / "pids", "w") as out:  # a file: survivors would hold a pipe open
+        got = subprocess.run([sys.executable, str(script)], stdout=out, timeout=120,
+                             check=False)
+    assert got.returncode == -9
+    pids = [int(p) for p in (tmp_path / "pids").read_text().split()]
+    assert len(pids) == 2
+
+    def alive(pid):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+    t = time.perf_counter()
+    while any(alive(p) for p in pids) and time.perf_counter() - t < 20:
+        time.sleep(0.1)
+    left = [p for p in pids if alive(p)]
+    for p in left:  # not to leave them to the machine when this fails
+        os.kill(p, 9)
+    assert not left
 
 
 def test_a_stopped_stage_ends_its_worker_processes():
@@ -844,7 +1022,7 @@ def test_a_store_that_is_a_file_or_a_foreign_folder_is_refused_with_the_fix(bunn
     (tmp_path / "data" / "mine.txt").write_text("keep me\n")
     (tmp_path / "f.zarr").write_text("a file\n")
     for store, what in [("data", "is a directory holding no tile store"),
-                        ("f.zarr", "is a file, not a directory")]:
+                        ("f.zarr", "is a file, not a tile store directory")]:
         with pytest.raises(InputError, match=rf"{store}: {what}; give --store a new or empty "
                                              "directory"):
             run(path, tmp_path / "o.npy", ratio=0.2, store=tmp_path / store)

@@ -10,6 +10,7 @@ finished tiles are not recomputed, and the output is rewritten from the stored r
 """
 
 import collections
+import concurrent.futures
 import contextlib
 import dataclasses
 import hashlib
@@ -363,9 +364,18 @@ def _exclusive(store_path):
     except ImportError:  # not on a POSIX system: no lock
         yield
         return
-    lock = store_path.with_name(f".{store_path.name}.lock")
-    lock.parent.mkdir(parents=True, exist_ok=True)
-    with open(lock, "a+") as fh:
+    # beside the store's real path: one store spelled through a symlink (``/scratch`` ->
+    # ``/lustre/scratch``, a link to the store) must not get a second lock of its own
+    real = store_path.resolve()
+    lock = real.with_name(f".{real.name}.lock")
+    try:
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        fh = open(lock, "a+")  # noqa: SIM115 - closed below
+    except PermissionError:  # a linked store whose real parent is not ours: as before
+        lock = store_path.with_name(f".{store_path.name}.lock")
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        fh = open(lock, "a+")  # noqa: SIM115
+    with fh:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -380,17 +390,66 @@ def _exclusive(store_path):
         yield
 
 
+#: what ``--store`` takes, for the errors that refuse another path
+STORE_FIX = ("a new or empty directory, or the store of an earlier run of this command to "
+             "resume it")
+
+
+def _check_store_writable(store_path):
+    """A ``--store`` this process cannot write is an error before any work: a store directory
+    made beforehand but not writable failed after the ingest's first pass over the input
+    (``…/store: Operation not permitted.``, exit 1), a resumed one at its first tile."""
+    where = next((p for p in (store_path, *store_path.parents) if p.exists()), None)
+    if where is not None and not where.is_dir():
+        if where == store_path:
+            raise InputError(f"{store_path}: is a file, not a tile store directory; give "
+                             f"--store {STORE_FIX}.")
+        return  # a file on the way: the lock's mkdir names it
+    if where is not None and not os.access(where, os.W_OK | os.X_OK):
+        raise InputError(f"{store_path}: the tile store's directory {where} is not writable; "
+                         "give --store a directory you can write to.")
+
+
+#: seconds beyond dask's connect timeout (``distributed.comm.timeouts.connect``) that a run
+#: waits for a scheduler's address to answer: dask's client waits forever on a port where
+#: something else listens (the dashboard's, 8787, for the scheduler's 8786: 4 min and on)
+CONNECT_SLACK = 10.0
+
+
 def _connect(address):
     """A dask.distributed client of the scheduler at ``address``, or an error saying how to
     start one: checked before any work, so a wrong address does not fail after the ingest."""
+    import threading
+
+    from dask.utils import parse_timedelta
     from distributed import Client
-    try:
-        return Client(address)
-    except (OSError, TimeoutError) as exc:
+    got = {}
+
+    def connect():
+        try:
+            got["client"] = Client(address)
+        except BaseException as exc:  # noqa: BLE001 - raised below, in the caller's thread
+            got["error"] = exc
+    limit = parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"), "s") \
+        + CONNECT_SLACK
+    thread = threading.Thread(target=connect, name="tiledsimplify-connect", daemon=True)
+    thread.start()
+    thread.join(limit)
+    if thread.is_alive():  # something listens there, but not a dask scheduler
+        raise TiledSimplifyError(
+            f"{address}: no dask scheduler answered within {limit:.0f} s, though something "
+            "accepts connections there (the dashboard's port, 8787 by default, rather than the "
+            "scheduler's, 8786?). Give the address `dask scheduler` prints (\"Scheduler at: "
+            "tcp://…\"); --scheduler threads runs on this machine alone.")
+    exc = got.get("error")
+    if isinstance(exc, (OSError, TimeoutError)):
         raise TiledSimplifyError(
             f"{address}: no dask scheduler answered ({exc}). Start one (`dask scheduler`, then "
             f"`dask worker {address}` on each machine) or give the address it prints; "
             "--scheduler threads runs on this machine alone.") from None
+    if exc is not None:
+        raise exc
+    return got["client"]
 
 
 def _start_compile(client, scheduler, workers):
@@ -452,6 +511,25 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
         report.close()
 
 
+def _pool_process():
+    """Initializer of a :func:`_process_pool` process: dask's, and on Linux the process ends
+    with its parent (``PR_SET_PDEATHSIG``). A run killed outright (SIGKILL: the OOM killer, a
+    batch system past its grace period) left its pool's processes behind, orphaned: they ran
+    every queued tile on, writing into the store no run held, and then idled on."""
+    from dask.multiprocessing import initialize_worker_process
+    initialize_worker_process()
+    if sys.platform.startswith("linux"):
+        parent = os.getppid()  # the run's process (or a forkserver: then its death counts)
+        try:
+            import ctypes
+            import signal
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
+        except (OSError, AttributeError):  # no prctl to call: as before
+            return
+        if os.getppid() != parent:  # the parent died before prctl
+            os._exit(1)
+
+
 @contextlib.contextmanager
 def _process_pool(workers):
     """The pool of the "processes" scheduler, made as dask makes its own (a
@@ -462,11 +540,11 @@ def _process_pool(workers):
     42 s (3M-point scan, 2 processes)."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from dask.multiprocessing import get_context, initialize_worker_process
+    from dask.multiprocessing import get_context
     if os.environ.get("PYTHONHASHSEED") in (None, "0"):
         os.environ["PYTHONHASHSEED"] = "6640"  # as dask sets it for the pools it makes
     pool = ProcessPoolExecutor(workers or machine.cpus(), mp_context=get_context(),
-                               initializer=initialize_worker_process)
+                               initializer=_pool_process)
     try:
         yield pool
     except BaseException:
@@ -657,12 +735,17 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"{input}: the input has no points; nothing to simplify. Check that it "
                          "is the file (or glob) you meant.")
     target = resolve_target(n, ratio, count)
+    if client is None and not (scheduler in SCHEDULERS or (
+            isinstance(scheduler, str) and scheduler.startswith("tcp://"))):
+        raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, "
+                         f"got {scheduler!r}.")  # before the ingest, not at the first stage
     if not 0.0 < float(floor) < 1.0:
         raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
                          f"first runs down to), got {floor!r}; the default is 0.5.")
     check_output(output, LAS_SUFFIXES)
     check_not_input(output, source.files)
     _warn_read_back(input, output, source)
+    _warn_leftovers(output)
     _check_layout(output, source)
     _check_room(output, target * _record_bytes(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
@@ -698,6 +781,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 tempfile.TemporaryDirectory(prefix="tiledsimplify-"))) / "store.zarr"
         else:  # absolute: workers elsewhere (another directory, another machine) open it
             store_path = Path(store).absolute()
+            _check_store_writable(store_path)
             held.enter_context(_exclusive(store_path))
         if client is not None:  # before the ingest: can every worker reach the store?
             log.info("%d dask worker(s) at %s can use %s", check_workers(
@@ -708,10 +792,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if _is_empty_dir(store_path):  # made beforehand (mkdir -p): a new store goes there
             pass
         elif store_path.exists() and not (store_path / "zarr.json").is_file():
-            what = ("is a directory holding no tile store" if store_path.is_dir()
-                    else "is a file, not a directory")  # TileStore.open said "no tile store at"
-            raise InputError(f"{store_path}: {what}; give --store a new or empty directory, or "
-                             "the store of an earlier run of this command to resume it.")
+            # (a file was refused before the lock); TileStore.open said "no tile store at"
+            raise InputError(f"{store_path}: is a directory holding no tile store; give --store "
+                             f"{STORE_FIX}.")
         elif store_path.exists():
             other = InputError(
                 f"{store_path}: this tile store was made for another input or other settings; "
@@ -830,6 +913,17 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         stage("refine")
         n_out, n_boundary = _write_output(ts, source, output, prefix, refined, client)
         stage("output")
+    except concurrent.futures.CancelledError as exc:  # distributed's FutureCancelledError
+        if client is None or getattr(exc, "reason", None) != "scheduler-connection-lost":
+            raise
+        # was a traceback (and, being no error of ours, no --summary for a pipeline to read)
+        address = getattr(client.scheduler, "address", None) or "the dask scheduler"
+        raise TiledSimplifyError(
+            f"{address}: the connection to the dask scheduler was lost during the run; no "
+            "output written. " + (
+                "Give --store DIR to make a long run resumable." if store is None else
+                f"The finished tiles stay in {store_path}: run the same command once the "
+                "scheduler is back to go on from them.")) from None
     finally:
         held.close()
     seconds["total"] = time.perf_counter() - t_start
@@ -925,6 +1019,25 @@ def _warn_read_back(input, output, source):
             log.warning("%s: the output goes where the input %s names its files; a later run "
                         "on the same input will read it as one more input file. Write it to "
                         "another folder.", output, input)
+
+
+def _warn_leftovers(output):
+    """Warn of the temporary files a killed run writing ``output`` left beside it: the
+    output's ``.NAME.*.partial`` and a text output's ``.NAME.*.records`` are removed when a run
+    fails or is stopped, but not after SIGKILL (the OOM killer, a batch system past its grace
+    period), and a rerun wrote new ones beside them: a killed run's kept points, whole, per
+    file. Not deleted here: another run may be writing the same output."""
+    try:
+        left = sorted(p for pattern in (f".{output.name}.*.partial", f".{output.name}.*.records")
+                      for p in output.parent.glob(pattern) if p.is_file())
+    except OSError:
+        return
+    if left:
+        size = sum(p.stat().st_size for p in left)
+        log.warning("%s: %d temporary file(s) of an earlier run that was killed while writing "
+                    "it take %.1f MB beside it (%s); delete them unless another run is writing "
+                    "%s now.", output, len(left), size / 1e6, ", ".join(p.name for p in left),
+                    output.name)
 
 
 def _check_layout(output, source):
