@@ -277,3 +277,17 @@ def test_an_input_the_workers_cannot_read_is_ingested_by_the_client(tmp_path, ca
         run_module.INGEST_PART_POINTS = old
     assert any("ingest in this client: 1 of 2 dask workers cannot read the input" in
                r.getMessage() and "tcp://b:2" in r.getMessage() for r in caplog.records)
+
+
+def test_tasks_left_without_workers_fail_saying_what_to_do():
+    """With the scheduler's ``no-workers-timeout`` set, a stage whose workers are all gone
+    fails with what to do (dask's NoWorkerError names a task key), not a traceback; without
+    it dask waits for new workers (README, "Cluster workers")."""
+    import dask
+    from tiledsimplify.pipeline.run import _compute
+    with dask.config.set({"distributed.scheduler.no-workers-timeout": "1s"}), \
+            distributed.LocalCluster(n_workers=0, processes=False, dashboard_address=None) as c, \
+            distributed.Client(c) as client:
+        with pytest.raises(TiledSimplifyError, match=r"tiles: no dask worker was left to run the "
+                                                     r"tasks .*with --store it goes on"):
+            _compute([dask.delayed(sum)([1, 2])], None, None, client, False)

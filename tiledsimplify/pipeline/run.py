@@ -59,6 +59,7 @@ from .workers import (
     check_workers,
     input_unreadable,
     killed_message,
+    no_worker_message,
     tile_memory_mb,
 )
 
@@ -482,13 +483,15 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
     try:
         if client is not None:
             from distributed import as_completed
-            from distributed.scheduler import KilledWorker
+            from distributed.scheduler import KilledWorker, NoWorkerError
             futures = client.compute(tasks)
             try:
                 for fut in as_completed(futures):
                     report(fut.result())
             except KilledWorker as exc:  # dask's message names the task, not the likely cause
                 raise TiledSimplifyError(killed_message(exc, stage)) from None
+            except NoWorkerError as exc:  # the scheduler's no-workers-timeout: say what to do
+                raise TiledSimplifyError(no_worker_message(exc, stage)) from None
             return client.gather(futures)
         if scheduler not in SCHEDULERS:
             raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, "

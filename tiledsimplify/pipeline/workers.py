@@ -127,6 +127,15 @@ def killed_message(exc, stage: str) -> str:
             "tiles.")
 
 
+def no_worker_message(exc, stage: str) -> str:
+    """The error for dask's ``NoWorkerError``: a task waited longer than the scheduler's
+    ``distributed.scheduler.no-workers-timeout`` with no worker to run it (every worker gone;
+    without that setting the run waits for new ones, however long)."""
+    return (f"{stage}: no dask worker was left to run the tasks ({exc}). Start workers "
+            "(`dask worker ADDRESS`) and run the same command again: with --store it goes on "
+            "from the finished tiles.")
+
+
 def _memory_warning(info: dict, tile_points: int) -> None:
     """Warn about workers whose memory limit is below what their threads' tiles need."""
     short = []
