@@ -1057,3 +1057,25 @@ def test_a_long_output_logs_its_progress(bunny, tmp_path, caplog, monkeypatch):
     with caplog.at_level("INFO", logger="tiledsimplify"):
         run(path, tmp_path / "quiet.npy", ratio=0.15, tile_points=1500, workers=2)
     assert not any(r.getMessage().startswith("output:") for r in caplog.records)
+
+
+def test_a_store_for_other_settings_is_refused_naming_what_differs(bunny, tmp_path):
+    """The refusal named no setting: a batch user changing one flag could not tell which."""
+    import os
+
+    from tiledsimplify import SimplifyOptions
+    X, _ = bunny
+    path = tmp_path / "in.npy"
+    np.save(path, X)
+    store = tmp_path / "st.zarr"
+    run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, store=store, progress=False)
+    with pytest.raises(InputError, match=r"st.zarr: this tile store was made for another input "
+                                         r"or other settings \(options.edge_angle: 35.0 here, "
+                                         r"40.0 in the store; target: 3268 here, 1634 in the "
+                                         r"store\); give a new --store"):
+        run(path, tmp_path / "o.npy", ratio=0.4, tile_points=3000, store=store, progress=False,
+            options=SimplifyOptions(edge_angle=35.0))
+    st = path.stat()
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))  # the input, touched
+    with pytest.raises(InputError, match=r"\(the same settings, but the input files differ"):
+        run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, store=store, progress=False)

@@ -146,6 +146,26 @@ def _fingerprint(source, settings):
     return h.hexdigest()[:20]
 
 
+def _store_differences(config, settings):
+    """What differs between a store's saved ``config`` and this run's ``settings`` (the two
+    parts of :func:`_fingerprint` but the input files), for the error that refuses the
+    store: ``"options.edge_angle: 35 here, 40 in the store; …"``, or that the input differs."""
+    def flat(d, prefix=""):
+        out = {}
+        for key, value in d.items():
+            if isinstance(value, dict):
+                out.update(flat(value, f"{prefix}{key}."))
+            else:
+                out[f"{prefix}{key}"] = value
+        return out
+    here = flat(json.loads(json.dumps(settings, default=str)))  # as the store saved them
+    there = flat({k: v for k, v in config.items() if k != "fingerprint"})
+    diffs = [f"{key}: {here.get(key, 'none')} here, {there.get(key, 'none')} in the store"
+             for key in sorted(set(here) | set(there)) if here.get(key) != there.get(key)]
+    return "; ".join(diffs) if diffs else (
+        "the same settings, but the input files differ in name, size or modification time")
+
+
 class _Progress:
     """Per-task progress of one stage: a log line per finished tile (from the calling
     process, so it is not lost in worker processes) and, on a terminal or in a notebook, a bar
@@ -799,20 +819,22 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             raise InputError(f"{store_path}: is a directory holding no tile store; give --store "
                              f"{STORE_FIX}.")
         elif store_path.exists():
-            other = InputError(
-                f"{store_path}: this tile store was made for another input or other settings; "
-                "give a new --store directory (or delete this one) to start over.")
+            def other(config):
+                return InputError(
+                    f"{store_path}: this tile store was made for another input or other "
+                    f"settings ({_store_differences(config, settings)}); give a new --store "
+                    "directory (or delete this one) to start over.")
             try:
                 ts = TileStore.open(store_path)
             except IncompleteStoreError:  # its ingest was stopped: no tile was done yet
-                if (TileStore.stored_attributes(store_path).get("config") or {}) \
-                        .get("fingerprint") != fp:
-                    raise other from None
+                config = TileStore.stored_attributes(store_path).get("config") or {}
+                if config.get("fingerprint") != fp:
+                    raise other(config) from None
                 log.info("%s: its ingest was interrupted; ingesting again", store_path)
                 again = True
             else:
                 if ts.config.get("fingerprint") != fp:
-                    raise other
+                    raise other(ts.config)
                 log.info("resuming from %s: %d of %d tiles done", store_path,
                          len(ts.done_tiles()), ts.n_tiles)
         if ts is None:
