@@ -62,6 +62,22 @@ def _stop(signum, frame):
     raise Stopped(signum)
 
 
+def _stop_behind(exc):
+    """The stop (``Stopped`` or ``KeyboardInterrupt``) that ``exc`` wraps, else None.
+
+    A signal that arrives while a numba kernel runs is handled when the kernel hands its
+    result back to Python (numba unpickles the arrays' types there), and numba then raises
+    ``SystemError: CPUDispatcher(...) returned a result with an exception set`` from the
+    handler's exception: a stop all the same, not a bug."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, (Stopped, KeyboardInterrupt)):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def _ratio(text):
     """A fraction of the points to keep, in (0, 1] (the API's own message names ``ratio=``)."""
     try:
@@ -458,9 +474,14 @@ def main(argv=None):
         message, code = _stopped_message(args, signum, time.perf_counter() - t0), 128 + signum
     except Exception as exc:  # a bug: its traceback follows (exit 1), but a pipeline reading
         # --summary must still learn that the run failed, as for every other failure
-        if args.command == "run" and getattr(args, "summary", None):
-            _failed_summary(args, EXIT_ERROR, f"unexpected error: {type(exc).__name__}: {exc}")
-        raise
+        stop = _stop_behind(exc)
+        if stop is None:
+            if args.command == "run" and getattr(args, "summary", None):
+                _failed_summary(args, EXIT_ERROR,
+                                f"unexpected error: {type(exc).__name__}: {exc}")
+            raise
+        signum = getattr(stop, "signum", signal.SIGINT)  # a stop that numba wrapped
+        message, code = _stopped_message(args, signum, time.perf_counter() - t0), 128 + signum
     finally:
         for s, h in handlers.items():
             signal.signal(s, h)
