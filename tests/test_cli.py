@@ -480,3 +480,17 @@ def test_edge_angle_reaches_both_commands(tmp_path, caplog):
                          "--edge-angle", "95"]) == EXIT_INPUT
         assert "options.edge_angle must be a fold in degrees" in caplog.text
         assert not out.exists()
+
+
+@pytest.mark.parametrize("command, said, not_said", [
+    ("report", "6 x dpi pixels on its longer side", "square"),  # panels follow the view
+    ("simplify", "0.08 rad on the two-ring measure in coverage", "(default: automatic)"),
+])
+def test_help_says_the_defaults_the_readme_gives(capsys, command, said, not_said):
+    """`--help` agrees with the README: a report panel is 6 in on its longer side, shaped as
+    the view within 3:1 (it said "square"); --boundary-threshold's default is the mode's,
+    0.08 rad in the default mode (it said "automatic", true of mode paper only)."""
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert said in text and not_said not in text

@@ -738,8 +738,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     Parameters
     ----------
     input : str or Path or list
-        A LAS/LAZ file, a folder or glob of LAS/LAZ tiles (read as one cloud), or a PLY,
-        XYZ/CSV/TXT or NPY file.
+        A LAS/LAZ file, a folder or glob of LAS/LAZ tiles (read as one cloud), an E57 file
+        (or a folder, glob or list of them), or a PLY, XYZ/CSV/TXT or NPY file.
     output : str or Path
         ``.las``/``.laz`` (from LAS input it keeps every dimension, scales, offsets and VLRs;
         from other input it is LAS 1.4 point format 6 at scales of a thousandth of the
