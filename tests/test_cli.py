@@ -350,6 +350,36 @@ def test_a_stopped_run_cleans_up_says_how_to_go_on_and_resumes(tmp_path, name, r
         assert out.read_bytes() == (tmp_path / "whole.npy").read_bytes()
 
 
+@pytest.mark.parametrize("command", ["simplify", "run"])
+def test_a_stop_during_a_kernel_is_a_stop_not_a_bug(cloud, tmp_path, monkeypatch, caplog, command):
+    """A signal that arrives while a numba kernel runs is handled when the kernel returns its
+    arrays, and numba raises SystemError ("... returned a result with an exception set") from
+    the handler's Stopped: still exit 128 + the signal and the stop's message (was exit 1 and
+    a traceback; seen with SIGTERM/SIGHUP during simplify's Delaunay on 519k LAZ points)."""
+    import json
+    import signal
+
+    import tiledsimplify.pipeline
+    from tiledsimplify import cli
+
+    def kernel_stopped(*args, **kwargs):
+        try:
+            raise cli.Stopped(signal.SIGHUP)
+        except cli.Stopped as stop:
+            raise SystemError("CPUDispatcher(<function _build>) returned a result with an "
+                              "exception set") from stop
+    monkeypatch.setattr(cli, "simplify_points", kernel_stopped)
+    monkeypatch.setattr(tiledsimplify.pipeline, "run", kernel_stopped)
+    _, path = cloud
+    out, summary = tmp_path / "o.npy", tmp_path / "run.json"
+    extra = ["--summary", str(summary)] if command == "run" else []
+    assert main([command, str(path), str(out), "--ratio", "0.25", "-q"] + extra) == 129
+    assert "stopped by SIGHUP after" in caplog.text and not out.exists()
+    if command == "run":
+        got = json.loads(summary.read_text())
+        assert got["exit_code"] == 129 and got["error"].startswith("stopped by SIGHUP after")
+
+
 def test_a_stop_signal_is_taken_once():
     # a second SIGTERM while the first one's clean-up runs is ignored, not a second exception
     import signal
@@ -450,3 +480,17 @@ def test_edge_angle_reaches_both_commands(tmp_path, caplog):
                          "--edge-angle", "95"]) == EXIT_INPUT
         assert "options.edge_angle must be a fold in degrees" in caplog.text
         assert not out.exists()
+
+
+@pytest.mark.parametrize("command, said, not_said", [
+    ("report", "6 x dpi pixels on its longer side", "square"),  # panels follow the view
+    ("simplify", "0.08 rad on the two-ring measure in coverage", "(default: automatic)"),
+])
+def test_help_says_the_defaults_the_readme_gives(capsys, command, said, not_said):
+    """`--help` agrees with the README: a report panel is 6 in on its longer side, shaped as
+    the view within 3:1 (it said "square"); --boundary-threshold's default is the mode's,
+    0.08 rad in the default mode (it said "automatic", true of mode paper only)."""
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert said in text and not_said not in text

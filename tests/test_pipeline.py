@@ -1,6 +1,7 @@
 """The tiled pipeline: exact global count, agreement with the untiled core, the same output for
 every scheduler, resume, LAS/LAZ end to end, and the command line."""
 
+import time
 from pathlib import Path
 
 import laspy
@@ -977,6 +978,53 @@ def test_a_stopped_stage_ends_its_worker_processes():
     # a worker that dies (the OOM killer) fails the stage instead of losing its task
     with pytest.raises(BrokenProcessPool):
         R._compute([dask.delayed(os._exit)(1)], "processes", 1, None, False)
+
+
+def test_a_stop_while_writes_are_in_flight_still_removes_the_temporary_store(
+        tmp_path, monkeypatch):
+    """A stop in the ingest leaves zarr's writes running in its I/O thread; they refilled the
+    temporary store while it was deleted, and the stop became ``OSError: Directory not
+    empty`` (exit 1, the store left in TMPDIR; seen with SIGTERM ~1 s into a 519k-point LAZ
+    run). The stop must come through and the store must go."""
+    import importlib
+    import tempfile
+    import threading
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    xy = np.random.default_rng(3).random((12_000, 2))
+    path = tmp_path / "in.npy"
+    np.save(path, np.c_[xy, 0.1 * np.sin(6 * xy[:, 0])])
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    real = R._IngestProgress.__call__
+    writers = []
+
+    def write_on(store, seconds=0.6):  # a write in flight: makes its directories anew
+        end = time.monotonic() + seconds
+        i = 0
+        while time.monotonic() < end:
+            try:
+                d = store / f"t{i % 7}" / "c"
+                d.mkdir(parents=True, exist_ok=True)
+                (d / f"{i}").write_bytes(b"x" * 64)
+            except OSError:
+                pass
+            i += 1
+
+    def stop_in_pass_2(self, pass_number, points):
+        if pass_number == 2 and points > 0 and not writers:
+            store = next(tmp.glob("tiledsimplify-*/store.zarr"))
+            writers.append(threading.Thread(target=write_on, args=(store,)))
+            writers[0].start()
+            time.sleep(0.05)
+            raise KeyboardInterrupt
+        return real(self, pass_number, points)
+
+    monkeypatch.setattr(R._IngestProgress, "__call__", stop_in_pass_2)
+    with pytest.raises(KeyboardInterrupt):
+        run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, chunk_points=1000)
+    writers[0].join()
+    assert list(tmp.iterdir()) == [] and not (tmp_path / "o.npy").exists()
 
 
 def test_a_run_stopped_in_its_ingest_ingests_again_and_an_empty_store_dir_is_used(

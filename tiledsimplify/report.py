@@ -349,8 +349,10 @@ def make_report(input_path, result_path, out_dir, *, mesh=None, spacing=None, up
     max_plot_points : int
         Draw at most this many points per panel (random subsample, for drawing only).
     dpi : int
-        Pixels per inch of the PNGs: a panel is ``6 * dpi`` pixels square (900 by default),
-        the overview ``13.5 * dpi`` by ``4.8 * dpi``.
+        Pixels per inch of the PNGs: a panel is ``6 * dpi`` pixels on its longer side (900
+        by default), shaped as the view within :data:`MAX_PANEL_STRETCH` of square, plus a
+        title line of ``0.4 * dpi``; the overview's three panels ``4.5 * dpi`` on their longer
+        side.
 
     Returns
     -------

@@ -18,6 +18,7 @@ import json
 import logging
 import math
 import os
+import shutil
 import socket
 import sys
 import tempfile
@@ -640,6 +641,47 @@ def default_tile_points(n):
 LOCAL_SPARE_MB = 300
 
 
+#: seconds a stopped run tries to delete its temporary tile store while writes in flight
+#: (zarr's I/O thread) still fill it
+REMOVE_WAIT = 5.0
+
+
+@contextlib.contextmanager
+def _temporary_directory():
+    """A temporary directory (under ``TMPDIR``), deleted at the end however the run ends.
+
+    A stop (Ctrl-C, SIGTERM) that interrupts the main thread while it waits on zarr's writes
+    (the ingest lays out and fills the store from zarr's own I/O thread) leaves those writes
+    running: they refill the directory while it is deleted, and ``TemporaryDirectory`` then
+    raised ``OSError: Directory not empty`` in place of the stop — exit 1 instead of 143, and
+    the store left in ``TMPDIR``. Here the deletion is tried again until the writes are
+    over, and never replaces the run's own exception."""
+    path = tempfile.mkdtemp(prefix="tiledsimplify-")
+    failed = True
+    try:
+        yield path
+        failed = False
+    finally:
+        _remove_tree(path, settle=0.2 if failed else 0.0)
+
+
+def _remove_tree(path, settle=0.0):
+    """Delete ``path``; after a failure, wait ``settle`` s and look again (writes in flight
+    can make it anew), up to :data:`REMOVE_WAIT` s; a warning if it cannot."""
+    deadline = time.monotonic() + REMOVE_WAIT
+    while True:
+        shutil.rmtree(path, ignore_errors=True)
+        if settle:
+            time.sleep(settle)
+        if not os.path.lexists(path):
+            return True
+        if time.monotonic() > deadline:
+            log.warning("%s: could not delete this temporary tile store; delete it by hand",
+                        path)
+            return False
+        time.sleep(0.05)
+
+
 def local_workers(scheduler, workers, client, tile_points, room=None):
     """The local worker count: ``workers`` if given, else one per CPU this process may use
     (:func:`..machine.cpus`: its affinity and cgroup quota, not the host's core count) — fewer
@@ -696,8 +738,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     Parameters
     ----------
     input : str or Path or list
-        A LAS/LAZ file, a folder or glob of LAS/LAZ tiles (read as one cloud), or a PLY,
-        XYZ/CSV/TXT or NPY file.
+        A LAS/LAZ file, a folder or glob of LAS/LAZ tiles (read as one cloud), an E57 file
+        (or a folder, glob or list of them), or a PLY, XYZ/CSV/TXT or NPY file.
     output : str or Path
         ``.las``/``.laz`` (from LAS input it keeps every dimension, scales, offsets and VLRs;
         from other input it is LAS 1.4 point format 6 at scales of a thousandth of the
@@ -800,8 +842,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             client = held.enter_context(_connect(scheduler))  # one connection for every stage
         warming = _start_compile(client, scheduler, workers)
         if store is None:
-            store_path = Path(held.enter_context(
-                tempfile.TemporaryDirectory(prefix="tiledsimplify-"))) / "store.zarr"
+            store_path = Path(held.enter_context(_temporary_directory())) / "store.zarr"
         else:  # absolute: workers elsewhere (another directory, another machine) open it
             store_path = Path(store).absolute()
             _check_store_writable(store_path)
