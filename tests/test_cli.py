@@ -88,6 +88,8 @@ def test_cli_exit_codes(cloud, tmp_path, caplog, capsys):
     assert not (tmp_path / "missing.ply").exists()
     with pytest.raises(SystemExit):
         main(["simplify", str(path), str(out)])  # neither --ratio nor --count
+    assert main(["run", str(path), str(tmp_path / "r.npy")]) == EXIT_INPUT  # nor for run
+    assert "give --ratio R (a fraction of the points, in (0, 1]) or --count N" in caplog.text
     assert main(["simplify", str(path), str(tmp_path / "out.laz"), "--ratio", "0.5"]) \
         == EXIT_INPUT  # LAS/LAZ output is run's: said before any reading
     assert f"tiledsimplify run {path} {tmp_path / 'out.laz'} --ratio R" in caplog.text

@@ -344,6 +344,9 @@ def _run(args):
     if "ratio" in run_cfg and "count" in run_cfg and (args.ratio is not None
                                                       or args.count is not None):
         run_cfg.pop("count" if args.ratio is not None else "ratio")
+    if "ratio" not in run_cfg and "count" not in run_cfg:  # the API would say "ratio= or count="
+        raise InputError("give --ratio R (a fraction of the points, in (0, 1]) or --count N, "
+                         "or ratio / count in the [run] table of --config.")
     if args.mode is not None:
         simplify_cfg = {**simplify_cfg, "mode": args.mode}
     if args.edge_angle is not None:
