@@ -142,6 +142,8 @@ def _core_rss(r):
 
 
 if __name__ == "__main__":
+    if {"-h", "--help"} & set(sys.argv[1:]):  # the usage, not a run of minutes
+        sys.exit(print(__doc__))
     if len(sys.argv) == 4 and sys.argv[1] == "--one":
         print(json.dumps(one(sys.argv[2], int(sys.argv[3]))))
     else:

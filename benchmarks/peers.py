@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -402,6 +403,8 @@ def our_methods(options=None):
 
 
 if __name__ == "__main__":
+    if {"-h", "--help"} & set(sys.argv[1:]):  # the usage, not a run of minutes
+        sys.exit(print(__doc__))
     have = available()
     print("available peers:", ", ".join(have))
     print("our modes:", ", ".join(our_methods()))

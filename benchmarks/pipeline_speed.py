@@ -135,6 +135,8 @@ def table(rows):
 
 
 if __name__ == "__main__":
+    if {"-h", "--help"} & set(sys.argv[1:]):  # the usage, not a run of minutes
+        sys.exit(print(__doc__))
     if len(sys.argv) > 2 and sys.argv[1] == "--table":  # saved --one outputs, one per file
         table([json.loads(Path(f).read_text().strip().splitlines()[-1]) for f in sys.argv[2:]])
     elif len(sys.argv) == 5 and sys.argv[1] == "--survey":

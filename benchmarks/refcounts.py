@@ -115,6 +115,8 @@ def main(case):
 
 
 if __name__ == "__main__":
+    if {"-h", "--help"} & set(sys.argv[1:]):  # the usage, not a run of minutes
+        sys.exit(print(__doc__))
     if len(sys.argv) == 5 and sys.argv[1] == "--child":
         child(sys.argv[2], int(sys.argv[3]), sys.argv[4])
     else:

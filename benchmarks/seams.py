@@ -7,6 +7,7 @@ scan of Fandisk (~200k points, 20 %), each cut into >= 8 tiles.
     python benchmarks/seams.py
 """
 
+import sys
 import tempfile
 import time
 import warnings
@@ -72,4 +73,6 @@ def main():
 
 
 if __name__ == "__main__":
+    if {"-h", "--help"} & set(sys.argv[1:]):  # the usage, not a run of minutes
+        sys.exit(print(__doc__))
     main()

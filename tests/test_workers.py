@@ -284,10 +284,11 @@ def test_tasks_left_without_workers_fail_saying_what_to_do():
     fails with what to do (dask's NoWorkerError names a task key), not a traceback; without
     it dask waits for new workers (README, "Cluster workers")."""
     import dask
+
     from tiledsimplify.pipeline.run import _compute
     with dask.config.set({"distributed.scheduler.no-workers-timeout": "1s"}), \
             distributed.LocalCluster(n_workers=0, processes=False, dashboard_address=None) as c, \
-            distributed.Client(c) as client:
-        with pytest.raises(TiledSimplifyError, match=r"tiles: no dask worker was left to run the "
-                                                     r"tasks .*with --store it goes on"):
-            _compute([dask.delayed(sum)([1, 2])], None, None, client, False)
+            distributed.Client(c) as client, \
+            pytest.raises(TiledSimplifyError, match=r"tiles: no dask worker was left to run the "
+                                                    r"tasks .*with --store it goes on"):
+        _compute([dask.delayed(sum)([1, 2])], None, None, client, False)
