@@ -308,3 +308,15 @@ def test_max_spacing_guard_keeps_a_density_floor():
     assert simplify_points(plate, count=30).count == 30
     with pytest.raises(InputError, match="max_spacing"):
         SimplifyOptions(guard="max_spacing")
+
+
+def test_keep_at_below_what_the_run_removed_says_why():
+    rng = np.random.default_rng(11)
+    X = rng.random((600, 3)) * [1, 1, 0.01]
+    res = simplify_points(X, count=300, options=SimplifyOptions(progressive=False))
+    assert res.keep_at(count=450).sum() == 450  # above the target: from the recorded order
+    with pytest.raises(InputError, match=r"keep_at: 100 points asked, but only 300 of 600 were "
+                                         r"removed in this run, so at least 300 remain: boundary "
+                                         r"and frozen points are never removed, and a run with "
+                                         r"options.progressive=False"):
+        res.keep_at(count=100)

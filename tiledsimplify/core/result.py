@@ -69,8 +69,10 @@ class SimplifyResult:
         if target < floor:
             raise InputError(
                 f"keep_at: {target} points asked, but only {self.order.size} of {self.n} were "
-                f"removed in this run, so at least {floor} remain. Run simplify_points with "
-                "options.progressive=True (the default) or a smaller target.")
+                f"removed in this run, so at least {floor} remain: boundary and frozen points "
+                "are never removed, and a run with options.progressive=False or "
+                "progressive_until stops early. Ask for that many or more, or run "
+                "simplify_points again with the smaller target.")
         keep = np.ones(self.n, dtype=bool)
         keep[self.order[: self.n - target]] = False
         return keep
@@ -87,7 +89,9 @@ def short_message(target, n, must, kept, boundary, vetoed, guard, frozen=None):
         why += f"; {vetoed} vetoed by the {guard} guard"
     return (f"asked to keep {target} of {n} points, but {must} must be kept ({why}): kept "
             f"{kept}. Raise the target, or raise options.boundary_threshold to flag fewer "
-            "boundary points" + (", or raise options.max_spacing" if vetoed else "") + ".")
+            "boundary points" + (", or raise options.max_spacing" if vetoed else "") +
+            " (on the command line: --boundary-threshold of simplify; [simplify] "
+            "boundary_threshold in a --config of run).")
 
 
 def resolve_target(n, ratio, count):
