@@ -84,6 +84,8 @@ def test_cli_exit_codes(cloud, tmp_path, caplog, capsys):
     # every point flagged as boundary: the count cannot be reached, the file is still written
     assert main(["simplify", str(path), str(out), "--ratio", "0.1",
                  "--boundary-threshold", "0", "--mode", "paper"]) == EXIT_BUDGET
+    assert "on the command line, --boundary-threshold T sets options.boundary_threshold" \
+        in caplog.text  # the budget message names the API's option
     assert len(read_points(out)) > 120
     assert not (tmp_path / "missing.ply").exists()
     with pytest.raises(SystemExit):

@@ -328,17 +328,13 @@ def test_a_short_run_says_why_as_the_core_does(bunny, tmp_path):
     assert s.message == (f"asked to keep 300 of 30000 points, but {s.n_output} must be kept (0 "
                          f"boundary; {s.n_output} vetoed by the max_spacing guard): kept "
                          f"{s.n_output}. Raise the target, or raise options.boundary_threshold "
-                         "to flag fewer boundary points, or raise options.max_spacing (on the "
-                         "command line: --boundary-threshold of simplify; [simplify] "
-                         "boundary_threshold in a --config of run).")
+                         "to flag fewer boundary points, or raise options.max_spacing.")
     X, path = bunny
     s = run(path, tmp_path / "b.npy", count=10, tile_points=3000)
     assert not s.reached and s.n_output == s.n_boundary > 10
     assert s.message == (f"asked to keep 10 of {len(X)} points, but {s.n_output} must be kept "
                          f"({s.n_output} boundary): kept {s.n_output}. Raise the target, or "
-                         "raise options.boundary_threshold to flag fewer boundary points (on "
-                         "the command line: --boundary-threshold of simplify; [simplify] "
-                         "boundary_threshold in a --config of run).")
+                         "raise options.boundary_threshold to flag fewer boundary points.")
 
 
 @pytest.fixture(scope="module")

@@ -22,6 +22,7 @@ import numpy as np
 
 from . import __version__, machine
 from .core import SimplifyOptions, compile_cache, simplify_points
+from .core.edge_fit import CANDIDATE, MIN_ANGLE
 from .core.options import MODES
 from .core.simplify import PEAK_BYTES_PER_POINT
 from .errors import BudgetWarning, FileFormatError, InputError, TiledSimplifyError
@@ -45,7 +46,10 @@ EXIT_OK, EXIT_ERROR, EXIT_INPUT, EXIT_BUDGET = 0, 1, 2, 3
 #: temporary tile store behind (~43 bytes an input point) and no word in the log.
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 EDGE_ANGLE_HELP = ("mode coverage: the least fold of a sharp edge in degrees, above 0 and at "
-                   "most 90 (default 40); lower flags shallower chamfers and bevels too")
+                   f"most 90 (default {MIN_ANGLE:g}); lower flags shallower chamfers and bevels "
+                   "too")
+#: the command's words for the budget message's options.boundary_threshold (core/result.py)
+BUDGET_HINT = "on the command line, %s sets options.boundary_threshold"
 
 
 class Stopped(BaseException):
@@ -127,8 +131,8 @@ def _parser():
                    help="write every input point with its flags and rank, not only the kept")
     s.add_argument("--boundary-threshold", type=float, default=None,
                    help="fixed threshold on the normal-deviation measure (default: the "
-                        "mode's: 0.08 rad on the two-ring measure in coverage, automatic in "
-                        "paper)")
+                        f"mode's: {CANDIDATE:g} rad on the two-ring measure in coverage, "
+                        "automatic in paper)")
     s.add_argument("--no-boundary", action="store_true", help="do not flag sharp-edge points")
     s.add_argument("--edge-angle", type=float, default=None, metavar="DEGREES",
                    help=EDGE_ANGLE_HELP)
@@ -366,6 +370,8 @@ def _run(args):
                   halo=run_cfg.get("halo"), floor=run_cfg.get("floor", 0.5),
                   progress=not (args.no_progress or args.quiet))
     code = EXIT_OK if summary.reached else EXIT_BUDGET
+    if not summary.reached:
+        log.warning(BUDGET_HINT, "a [simplify] boundary_threshold in a --config file")
     if args.summary:
         write_json(args.summary, {"input": str(args.input), "version": __version__,
                                   **summary.to_dict(), "exit_code": code})
@@ -435,6 +441,8 @@ def _simplify(args):
     write_points(args.output, xyz[sel], columns)
     log.info("wrote %d of %d points to %s (%.2f s in all)", int(sel.sum()), res.n, args.output,
              time.perf_counter() - t0)
+    if not res.reached:
+        log.warning(BUDGET_HINT, "--boundary-threshold T")
     return EXIT_OK if res.reached else EXIT_BUDGET
 
 
@@ -475,18 +483,16 @@ def main(argv=None):
         # output writers' errors say what to do; "No space left on device" says it itself)
         where = f"{exc.filename}: " if exc.filename else ""
         message, code = f"{where}{exc.strerror or exc}.", EXIT_ERROR
-    except (KeyboardInterrupt, Stopped) as exc:  # everything on the way cleaned up after it
-        signum = getattr(exc, "signum", signal.SIGINT)
-        message, code = _stopped_message(args, signum, time.perf_counter() - t0), 128 + signum
-    except Exception as exc:  # a bug: its traceback follows (exit 1), but a pipeline reading
-        # --summary must still learn that the run failed, as for every other failure
+    except (KeyboardInterrupt, Stopped, Exception) as exc:  # a stop (perhaps wrapped by
+        # numba), everything on the way cleaned up after it; else a bug: its traceback follows
+        # (exit 1), but a pipeline reading --summary must still learn that the run failed
         stop = _stop_behind(exc)
         if stop is None:
             if args.command == "run" and getattr(args, "summary", None):
                 _failed_summary(args, EXIT_ERROR,
                                 f"unexpected error: {type(exc).__name__}: {exc}")
             raise
-        signum = getattr(stop, "signum", signal.SIGINT)  # a stop that numba wrapped
+        signum = getattr(stop, "signum", signal.SIGINT)
         message, code = _stopped_message(args, signum, time.perf_counter() - t0), 128 + signum
     finally:
         for s, h in handlers.items():

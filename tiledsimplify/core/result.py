@@ -89,9 +89,7 @@ def short_message(target, n, must, kept, boundary, vetoed, guard, frozen=None):
         why += f"; {vetoed} vetoed by the {guard} guard"
     return (f"asked to keep {target} of {n} points, but {must} must be kept ({why}): kept "
             f"{kept}. Raise the target, or raise options.boundary_threshold to flag fewer "
-            "boundary points" + (", or raise options.max_spacing" if vetoed else "") +
-            " (on the command line: --boundary-threshold of simplify; [simplify] "
-            "boundary_threshold in a --config of run).")
+            "boundary points" + (", or raise options.max_spacing" if vetoed else "") + ".")
 
 
 def resolve_target(n, ratio, count):

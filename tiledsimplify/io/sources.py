@@ -230,7 +230,7 @@ class TextSource:
         path = self.files[0].absolute()
         c = self.chunk_points
         return [TextPart(path, self._offsets[lo // c], lo, hi, c,
-                         self._lines[lo // c:-(-hi // c)] + [self._lines[-(-hi // c)]],
+                         self._lines[lo // c:-(-hi // c) + 1],
                          self._delimiter, self._count, self._colour)
                 for lo, hi in part_ranges(self._count, max_points, c)]
 

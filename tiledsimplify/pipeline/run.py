@@ -514,9 +514,7 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
             except NoWorkerError as exc:  # the scheduler's no-workers-timeout: say what to do
                 raise TiledSimplifyError(no_worker_message(exc, stage)) from None
             return client.gather(futures)
-        if scheduler not in SCHEDULERS:
-            raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, "
-                             f"got {scheduler!r}.")
+        _check_scheduler(scheduler)
         kw = {"scheduler": scheduler}
         if workers and scheduler != "synchronous":
             kw["num_workers"] = int(workers)
@@ -533,6 +531,14 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
             return list(dask.compute(*tasks, **kw))
     finally:
         report.close()
+
+
+def _check_scheduler(scheduler):
+    """Refuse a scheduler that is none of :data:`SCHEDULERS` nor a ``tcp://`` address."""
+    if not (scheduler in SCHEDULERS or (isinstance(scheduler, str)
+                                        and scheduler.startswith("tcp://"))):
+        raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, "
+                         f"got {scheduler!r}.")
 
 
 def _pool_process():
@@ -800,10 +806,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"{input}: the input has no points; nothing to simplify. Check that it "
                          "is the file (or glob) you meant.")
     target = resolve_target(n, ratio, count)
-    if client is None and not (scheduler in SCHEDULERS or (
-            isinstance(scheduler, str) and scheduler.startswith("tcp://"))):
-        raise InputError(f"scheduler must be one of {SCHEDULERS} or tcp://HOST:PORT, "
-                         f"got {scheduler!r}.")  # before the ingest, not at the first stage
+    if client is None:
+        _check_scheduler(scheduler)  # before the ingest, not at the first stage
     if not 0.0 < float(floor) < 1.0:
         raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
                          f"first runs down to), got {floor!r}; the default is 0.5.")
