@@ -314,6 +314,26 @@ def test_a_single_tile_runs_exactly_to_the_target(tmp_path):
     assert len(np.load(tmp_path / "out.npy")) == s.target == 600
 
 
+def test_max_spacing_holds_across_tiles(bunny, tmp_path):
+    """A tiled run with the max_spacing guard leaves no input point farther than the limit
+    from a kept one, at tile faces too: a tile's points are covered by its own points only
+    (its halo's points are kept or removed by their own tiles). Before, covers from the halo
+    counted, and the rule itself bounded nothing: 1,700 Bunny points beyond 5 spacings."""
+    from scipy.spatial import cKDTree
+
+    from tiledsimplify import SimplifyOptions
+    from tiledsimplify.synthetic import spacing
+    X, path = bunny
+    limit = 3 * spacing(X)
+    s = run(path, tmp_path / "o.npy", ratio=0.01, tile_points=2500, workers=2, progress=False,
+            options=SimplifyOptions(guard="max_spacing", max_spacing=limit))
+    out = np.load(tmp_path / "o.npy")
+    K = np.c_[out["x"], out["y"], out["z"]]
+    assert not s.reached and "vetoed by the max_spacing guard" in s.message
+    assert s.n_tiles >= 3 and len(K) == s.n_output > 0.01 * len(X)
+    assert cKDTree(K).query(X)[0].max() <= limit
+
+
 def test_a_short_run_says_why_as_the_core_does(bunny, tmp_path):
     """A run that cannot reach its count says what it had to keep: boundary points, and
     points the max_spacing guard vetoed — it blamed boundary points alone, even where there

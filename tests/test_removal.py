@@ -49,6 +49,11 @@ def _reach(X, spacings):
         else np.inf
 
 
+def _no_guard(X):
+    """``covers`` and ``owners`` of :func:`remove_points` for a run without a guard."""
+    return np.ones(len(X), dtype=bool), np.full((2, len(X)), -1, dtype=np.int64)
+
+
 def _state(X, code=0, weight=0.0, reach=np.inf):
     D = scale_of(X)
     st = neighbourhoods(X, D, reach)
@@ -78,7 +83,7 @@ def test_maintained_state_equals_recomputation(kind, measure, reach, update):
     order, at, st.pool = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
         st.normals, st.stable, flags, removable.copy(), imp, heap.coordinate_hash(X), code,
-        weight, 0, 0.0, steps, BOX_FACTOR * D, TOL_FACTOR * D, reach, update)
+        weight, 0, 0.0, *_no_guard(X), steps, BOX_FACTOR * D, TOL_FACTOR * D, reach, update)
     assert len(order) == steps == len(set(order.tolist()))
     assert not (flags[order] | frozen[order]).any()
     alive = np.ones(len(X), bool)
@@ -157,7 +162,7 @@ def test_greedy_order_equals_naive_from_scratch(kind, measure, reach, update):
     order, at, _ = remove_points(
         X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
         st.normals, st.stable, flags, removable.copy(), imp, heap.coordinate_hash(X), code,
-        weight, 0, 0.0, steps, BOX_FACTOR * D, TOL_FACTOR * D, reach, update)
+        weight, 0, 0.0, *_no_guard(X), steps, BOX_FACTOR * D, TOL_FACTOR * D, reach, update)
     ref_order, ref_at = _naive_greedy(X, flags, frozen, steps, D, code, weight, reach,
                                       None if update else normals0)
     assert order.tolist() == ref_order
@@ -195,9 +200,64 @@ def test_room_grown_between_removals_gives_the_same_sequence(monkeypatch):
         runs.append(remove_points(
             X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
             st.normals, st.stable, flags, removable, imp, heap.coordinate_hash(X), 0, 0.0, 0,
-            0.0, int(removable.sum()) - 10, BOX_FACTOR * D, TOL_FACTOR * D, np.inf, False))
+            0.0, *_no_guard(X), int(removable.sum()) - 10, BOX_FACTOR * D, TOL_FACTOR * D, np.inf, False))
     (o1, a1, p1), (o2, a2, p2) = runs
     assert len(o1) > 200 and p2.size > p1.size // 4
     assert p2.size > sizes  # the packed run's pool was grown between removals
     np.testing.assert_array_equal(o1, o2)
     np.testing.assert_array_equal(a1, a2)
+
+
+def _farthest(X, keep):
+    """The largest distance from a point of ``X`` to the nearest point of ``X[keep]``."""
+    return float(cKDTree(X[keep]).query(X)[0].max())
+
+
+@pytest.mark.parametrize("kind", ["bunny", "scan"])
+def test_max_spacing_leaves_no_point_farther_than_the_limit(kind, data_dir):
+    """The ``max_spacing`` guard (issue #5: "users may set a maximum spacing in model units"):
+    at the count asked and at every count of the sequence (``keep_at``), no input point lies
+    farther than the limit from a kept point — checked by a kd-tree over all of them. The rule
+    until 2026-12-04 (a remaining neighbour of the removed point within the limit) left Bunny
+    points 7 spacings from every kept one at a limit of 5. Duplicates and frozen points too."""
+    from tiledsimplify import SimplifyOptions, simplify_points
+    from tiledsimplify.io import read_mesh, read_points
+    from tiledsimplify.synthetic import scan, spacing
+    if kind == "bunny":
+        X = read_points(data_dir / "meshes" / "stanford_bunny" / "bun_zipper_res2.ply.gz")
+        X = np.concatenate([X, X[:50]])  # exact duplicates
+    else:
+        V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
+        X, _ = scan(V, F, n_points=8000, seed=0)
+        X, _ = scan(V, F, n_points=8000, noise=0.1 * spacing(X), seed=0)
+    s = spacing(X)
+    frozen = np.zeros(len(X), bool)
+    frozen[::97] = True
+    for factor in (2.0, 5.0):
+        limit = factor * s
+        with pytest.warns(UserWarning, match="vetoed by the max_spacing guard"):
+            res = simplify_points(X, 0.01, frozen=frozen, options=SimplifyOptions(
+                guard="max_spacing", max_spacing=limit))
+        kept = int(res.keep.sum())
+        assert kept > 0.01 * len(X) and _farthest(X, res.keep) <= limit
+        for count in (kept + 1, kept + (len(X) - kept) // 3, len(X) // 2):
+            assert _farthest(X, res.keep_at(count=count)) <= limit, (factor, count)
+        # and it binds: the same greedy without it leaves wider gaps at that count
+        free = simplify_points(X, count=kept, frozen=frozen,
+                               options=SimplifyOptions(prethin=0, refine=False))
+        assert _farthest(X, free.keep) > limit, factor
+
+
+def test_a_guard_that_never_vetoes_removes_as_the_greedy_does():
+    """A limit no gap reaches: the same sequence as the greedy without a guard (the guard
+    also turns off the pre-thinning and the refinement, so those are off there too) until
+    the last few points, which no remaining point can cover."""
+    from tiledsimplify import SimplifyOptions, simplify_points
+    X = _cloud("wavy", 1500)
+    guarded = simplify_points(X, 0.1, options=SimplifyOptions(guard="max_spacing",
+                                                              max_spacing=1e6))
+    free = simplify_points(X, 0.1, options=SimplifyOptions(prethin=0, refine=False))
+    # run on to the end, the last few points have no cover left to hand theirs to
+    assert guarded.reached and len(free.order) - 10 < len(guarded.order) < len(free.order)
+    np.testing.assert_array_equal(guarded.order[:1400], free.order[:1400])
+    np.testing.assert_array_equal(guarded.keep, free.keep)

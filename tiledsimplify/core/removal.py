@@ -15,7 +15,10 @@ changes (Fig. 1):
    whose normal changed (the second ring: points ``x`` with ``a ∈ DN_x``, found in ``VN_a``).
 
 Boundary and frozen points are never removed but stay in every neighbourhood. A guard rule
-(:data:`GUARDS`) may veto a removal; the vetoed point is then kept. The removal order
+(:data:`GUARDS`) may veto a removal; the vetoed point is then kept. The ``max_spacing`` guard
+bounds the gaps (issue #5, "no holes": a maximum spacing in model units): every removed point
+is covered by a remaining point within the limit, and a removal must hand the removed point
+and everything it covers to covers within the limit (:func:`guard_allows`). The removal order
 and the importance at removal are recorded for every step, so one run answers every coarser
 count (and a tiled run can cut all tiles at one importance level).
 """
@@ -37,30 +40,80 @@ GUARDS = {"none": 0, "max_spacing": 1}
 
 
 @jit_leaf
-def guard_allows(guard, value, X, p, start, cnt, pool):
-    """May ``p`` be removed now?
-
-    ``none`` (0): always. ``max_spacing`` (1): only if a remaining Voronoi neighbour lies within
-    ``value`` (model units) — the loop then thins dense regions down to a spacing of about
-    ``value`` but never isolates a point; like Poisson-disk elimination, a floor on density.
-    """
-    if guard == 0:
-        return True
+def _nearest_cover(X, x, p, start, cnt, pool, covers):
+    """The point of ``VN_p`` nearest to ``x`` that may cover others (``covers``), and its
+    squared distance (``-1``, ``inf`` if there is none)."""
     s = start[p]
     best = math.inf
+    arg = -1
     for j in range(cnt[p]):
         q = pool[s + j]
-        dx, dy, dz = X[q, 0] - X[p, 0], X[q, 1] - X[p, 1], X[q, 2] - X[p, 2]
+        if not covers[q]:
+            continue
+        dx, dy, dz = X[q, 0] - X[x, 0], X[q, 1] - X[x, 1], X[q, 2] - X[x, 2]
         d = dx * dx + dy * dy + dz * dz
         if d < best:
             best = d
-    return best <= value * value
+            arg = q
+    return arg, best
+
+
+@jit_leaf
+def guard_allows(guard, value, X, p, start, cnt, pool, covers, owners):
+    """May ``p`` be removed now?
+
+    ``none`` (0): always. ``max_spacing`` (1): only if ``p`` and every removed point it
+    covers can each be covered by a remaining Voronoi neighbour of ``p`` within ``value``
+    (model units). ``owners`` holds the cover lists (:func:`pass_on_cover`): ``owners[0, q]``
+    the first point ``q`` covers, ``owners[1, x]`` the next point after ``x`` in its cover's
+    list (``-1``: none). Points not in ``covers`` (a tile's halo) neither cover nor need a
+    cover. So every removed point of ``covers`` always lies within ``value`` of a remaining
+    one: no input point is left farther than ``value`` from the kept points, at every count
+    of the sequence. A veto is for good: removals only take covers away (the check looks
+    among ``VN_p`` only, so it can be stricter than needed, never looser).
+    """
+    if guard == 0:
+        return True
+    limit = value * value
+    if covers[p]:
+        _, d = _nearest_cover(X, p, p, start, cnt, pool, covers)
+        if d > limit:
+            return False
+    x = owners[0, p]
+    while x >= 0:
+        _, d = _nearest_cover(X, x, p, start, cnt, pool, covers)
+        if d > limit:
+            return False
+        x = owners[1, x]
+    return True
+
+
+@jit_leaf
+def pass_on_cover(X, p, start, cnt, pool, covers, owners):
+    """Before ``p`` is removed (its Voronoi list still whole): hand ``p`` and the points it
+    covers each to its nearest covering Voronoi neighbour of ``p`` (:func:`guard_allows` has
+    checked that one lies within the limit). The nearest remaining point to anything in
+    ``p``'s Voronoi cell is a Voronoi neighbour of ``p``; a point a cover holds from outside
+    its cell only makes the next check stricter, never wrong — distances are checked, not
+    assumed."""
+    x = owners[0, p]
+    owners[0, p] = -1
+    while x >= 0:
+        after = owners[1, x]
+        q, _ = _nearest_cover(X, x, p, start, cnt, pool, covers)
+        owners[1, x] = owners[0, q]
+        owners[0, q] = x
+        x = after
+    if covers[p]:
+        q, _ = _nearest_cover(X, p, p, start, cnt, pool, covers)
+        owners[1, p] = owners[0, q]
+        owners[0, q] = p
 
 
 @jit
 def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable,
-                  boundary, removable, importance, tie, code, weight, guard, guard_value, n_steps,
-                  half, tol, reach, update_normals=True, stop_above=math.inf):
+                  boundary, removable, importance, tie, code, weight, guard, guard_value, covers,
+                  owners, n_steps, half, tol, reach, update_normals=True, stop_above=math.inf):
     """Remove up to ``n_steps`` points, least important first.
 
     Mutates the neighbour lists, local meshes, normals and importance in place (for the
@@ -75,6 +128,9 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     ``tie`` (uint64) breaks importance ties (see :mod:`.heap`); ``code`` and ``weight`` select the
     importance measure (:func:`.importance.importance_of`). ``guard`` / ``guard_value``
     select a guard rule (:data:`GUARDS`) that can veto a removal; a vetoed point is kept.
+    ``covers`` (bool) and ``owners`` (int64 (2, n), ``-1`` at the start, kept between calls)
+    are the ``max_spacing`` guard's: which points cover and need cover, and who covers whom
+    (:func:`guard_allows`).
     The loop also stops right after a removal whose importance exceeds ``stop_above``: the
     recorded sequence then holds every step whose running maximum of importance at removal is
     at most ``stop_above`` (the prefix does not depend on where the loop stops).
@@ -115,9 +171,9 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     while True:
         status = _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable,
                       boundary, removable, importance, tie, code, weight, guard, guard_value,
-                      n_steps, half, tol, reach, update_normals, stop_above, hp, pos, order,
-                      at, stamp, mark, mesh_changed, normal_changed, before, link, cand, bufs,
-                      lbufs, frame, fbufs, mbufs, newdn, nvec, wvec, state)
+                      covers, owners, n_steps, half, tol, reach, update_normals, stop_above, hp,
+                      pos, order, at, stamp, mark, mesh_changed, normal_changed, before, link,
+                      cand, bufs, lbufs, frame, fbufs, mbufs, newdn, nvec, wvec, state)
         if status == DONE:
             break
         if status == NO_ROOM:
@@ -148,8 +204,8 @@ STEP, SIZE, NEED_LINK, NEED_MESH, NEED_POOL = range(5)
 
 @jit_leaf
 def _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable, boundary,
-         removable, importance, tie, code, weight, guard, guard_value, n_steps, half, tol, reach,
-         update_normals, stop_above, hp, pos, order, at, stamp, mark, mesh_changed,
+         removable, importance, tie, code, weight, guard, guard_value, covers, owners, n_steps,
+         half, tol, reach, update_normals, stop_above, hp, pos, order, at, stamp, mark, mesh_changed,
          normal_changed, before, link, cand, bufs, lbufs, frame, fbufs, mbufs, newdn, nvec, wvec,
          state):
     """The removal loop of :func:`remove_points`, from step ``state[STEP]``.
@@ -181,8 +237,10 @@ def _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, sta
         p = heap.pop(hp, pos, importance, tie, size)
         size -= 1
         removable[p] = False
-        if not guard_allows(guard, guard_value, X, p, start, cnt, pool):
-            continue  # kept for good: removals only make the neighbourhood sparser
+        if not guard_allows(guard, guard_value, X, p, start, cnt, pool, covers, owners):
+            continue  # kept for good: removals only take covers away
+        if guard == 1:
+            pass_on_cover(X, p, start, cnt, pool, covers, owners)
         order[step] = p
         at[step] = importance[p]
         # -- 1. Voronoi neighbourhoods

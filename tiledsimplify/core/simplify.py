@@ -52,15 +52,16 @@ def _validate(xyz, frozen):
                          f"coordinates (first at index {first}: {X[first].tolist()}); drop or "
                          "repair them before simplifying.")
     n = X.shape[0]
-    if frozen is None:
-        F = np.zeros(n, dtype=bool)
-    else:
-        F = np.asarray(frozen)
-        if F.shape != (n,) or F.dtype != np.bool_:
-            raise InputError(f"frozen must be a boolean mask of shape ({n},), got dtype "
-                             f"{F.dtype} and shape {F.shape}.")
-        F = F.copy()
-    return X, F
+    return X, (np.zeros(n, dtype=bool) if frozen is None else _mask(frozen, n, "frozen"))
+
+
+def _mask(mask, n, name):
+    """A copy of the boolean mask ``mask`` of ``n`` points, or an error naming it."""
+    M = np.asarray(mask)
+    if M.shape != (n,) or M.dtype != np.bool_:
+        raise InputError(f"{name} must be a boolean mask of shape ({n},), got dtype "
+                         f"{M.dtype} and shape {M.shape}.")
+    return M.copy()
 
 
 @dataclass
@@ -271,7 +272,7 @@ def neighbourhood_state(xyz, frozen=None, options=None):
 
 
 def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, state=None,
-                    prethin_target=None):
+                    prethin_target=None, covered=None):
     """Simplify a point cloud, keeping (and flagging) every point on or near a sharp edge.
 
     Parameters
@@ -297,6 +298,11 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         The count the pre-thinning (``options.prethin``) multiplies instead of the target: a
         tiled run passes its global target's share of the tile, so that every pass over a
         tile thins it the same way whatever count that pass asks for.
+    covered : bool array (n,), optional
+        With ``options.guard="max_spacing"``: the points that must stay within
+        ``options.max_spacing`` of a kept point, and the only ones that may keep others
+        covered (default: all). A tiled run passes a tile's own points: its halo points are
+        decided by their own tiles, so they cannot vouch for a gap.
 
     Returns
     -------
@@ -332,6 +338,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     options = _options(options)
     X, frozen = _validate(xyz, frozen)
     n = X.shape[0]
+    covered = None if covered is None else _mask(covered, n, "covered")
     target = resolve_target(n, ratio, count)
     stats = {"n_input": n}
     clock = time.perf_counter()
@@ -415,6 +422,11 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     else:
         Xg, boundary_g, tie_g, alive = Xu, boundary_u, tie, ~never_u
     lap("prethin")
+    # the max_spacing guard's cover lists (removal.guard_allows; empty, unread, without it)
+    m_guard = Xg.shape[0] if options.guard == "max_spacing" else 0
+    covers_g = (np.ones(m_guard, dtype=bool) if covered is None or not m_guard
+                else covered[rep] if sub is None else covered[rep][keep_ids])
+    owners = np.full((2, m_guard), -1, dtype=np.int64)
     imp_u = np.zeros(Xg.shape[0])
     all_importance(code, Xg, st.normals, boundary_g, st.dn, st.dn_cnt, weight, imp_u)
     lap("importance")
@@ -425,7 +437,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         order_k, at_k, st.pool = remove_points(
             Xg, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
             st.normals, st.stable, boundary_g, alive, imp_u, tie_g, code, weight,
-            GUARDS[options.guard], float(options.max_spacing or 0.0), n_steps, BOX_FACTOR * D,
+            GUARDS[options.guard], float(options.max_spacing or 0.0), covers_g, owners, n_steps,
+            BOX_FACTOR * D,
             TOL_FACTOR * D, st.reach, options.update_normals, stop_above)
         return (order_k if sub is None else keep_ids[order_k]), at_k
 

@@ -200,7 +200,8 @@ def simplify_tile(store_path, tile, options, threshold, depth, share=None):
         opts["refine"] = False  # only the order is used here; the kept set is the global cut's
         aim = None if share is None else math.ceil(share * len(xyz))
         res = simplify_points(xyz, count=count, frozen=tile_frozen,
-                              options=SimplifyOptions(**opts), state=state, prethin_target=aim)
+                              options=SimplifyOptions(**opts), state=state, prethin_target=aim,
+                              covered=~frozen)  # a halo point's own tile may remove it
         n_all = int(res.order.size)
         if kind == "keep":
             exhausted = n_all < n_remove
