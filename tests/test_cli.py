@@ -486,6 +486,27 @@ def test_edge_angle_reaches_both_commands(tmp_path, caplog):
         assert not out.exists()
 
 
+def test_max_spacing_reaches_both_commands(cloud, tmp_path, caplog, capsys):
+    """``--max-spacing D``: no input point is left farther than D from a kept one, by simplify
+    and by run (more than the count is kept: exit 3, with the flag in the advice); a
+    distance that is not positive is refused by the parser."""
+    from scipy.spatial import cKDTree
+    X, path = cloud
+    limit = 0.25
+    for command in ("simplify", "run"):
+        out = tmp_path / f"{command}.npy"
+        caplog.clear()
+        assert main([command, str(path), str(out), "--ratio", "0.01", "--max-spacing",
+                     str(limit), "--no-boundary" if command == "simplify" else "-q"]) \
+            == EXIT_BUDGET
+        K = np.load(out)
+        assert len(K) > 12 and cKDTree(np.c_[K["x"], K["y"], K["z"]]).query(X)[0].max() <= limit
+        assert "--max-spacing DISTANCE options.max_spacing" in caplog.text
+        with pytest.raises(SystemExit):
+            main([command, str(path), str(out), "--ratio", "0.01", "--max-spacing", "0"])
+        assert "expected a positive distance" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("command, said, not_said", [
     ("report", "6 x dpi pixels on its longer side", "square"),  # panels follow the view
     ("simplify", "0.08 rad on the two-ring measure in coverage", "(default: automatic)"),

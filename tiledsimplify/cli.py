@@ -48,8 +48,13 @@ STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 EDGE_ANGLE_HELP = ("mode coverage: the least fold of a sharp edge in degrees, above 0 and at "
                    f"most 90 (default {MIN_ANGLE:g}); lower flags shallower chamfers and bevels "
                    "too")
+MAX_SPACING_HELP = ("leave no input point farther than DISTANCE (model units) from a kept "
+                    "point: removals that would are vetoed, so more than the count may be kept "
+                    "(exit 3); turns off the pre-thinning and the gap refinement")
 #: the command's words for the budget message's options.boundary_threshold (core/result.py)
-BUDGET_HINT = "on the command line, %s sets options.boundary_threshold"
+BUDGET_HINT = "on the command line, %s sets options.boundary_threshold%s"
+#: ... and options.max_spacing, where the run had a guard
+MAX_SPACING_HINT = " and --max-spacing DISTANCE options.max_spacing"
 
 
 class Stopped(BaseException):
@@ -91,6 +96,18 @@ def _ratio(text):
     if not 0 < value <= 1:
         raise argparse.ArgumentTypeError(f"expected a fraction of the points in (0, 1], got "
                                          f"{text!r}; give --count N for a number of points")
+    return value
+
+
+def _distance(text):
+    """A positive, finite length in model units."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive distance in the input's units, "
+                                         f"got {text!r}")
     return value
 
 
@@ -136,6 +153,8 @@ def _parser():
     s.add_argument("--no-boundary", action="store_true", help="do not flag sharp-edge points")
     s.add_argument("--edge-angle", type=float, default=None, metavar="DEGREES",
                    help=EDGE_ANGLE_HELP)
+    s.add_argument("--max-spacing", type=_distance, default=None, metavar="DISTANCE",
+                   help=MAX_SPACING_HELP)
     s.add_argument("--mode", choices=MODES, default=MODES[0],
                    help="coverage (default): thin edge flags, no emptied faces; paper: the "
                         "published rule")
@@ -176,6 +195,8 @@ def _parser():
                    help="coverage (default) or paper; overrides [simplify] mode")
     r.add_argument("--edge-angle", type=float, default=None, metavar="DEGREES",
                    help=EDGE_ANGLE_HELP + "; overrides [simplify] edge_angle")
+    r.add_argument("--max-spacing", type=_distance, default=None, metavar="DISTANCE",
+                   help=MAX_SPACING_HELP + "; overrides [simplify] guard and max_spacing")
     r.add_argument("--floor", type=float, default=None,
                    help="each tile first runs down to this fraction of the target ratio "
                         "(0.5); tiles the global cut needs deeper run again. Changes the "
@@ -353,8 +374,7 @@ def _run(args):
                          "or ratio / count in the [run] table of --config.")
     if args.mode is not None:
         simplify_cfg = {**simplify_cfg, "mode": args.mode}
-    if args.edge_angle is not None:
-        simplify_cfg = {**simplify_cfg, "edge_angle": args.edge_angle}
+    simplify_cfg = {**simplify_cfg, **_option_flags(args)}
     try:
         options = SimplifyOptions.from_mapping(simplify_cfg)
     except InputError as exc:
@@ -371,7 +391,8 @@ def _run(args):
                   progress=not (args.no_progress or args.quiet))
     code = EXIT_OK if summary.reached else EXIT_BUDGET
     if not summary.reached:
-        log.warning(BUDGET_HINT, "a [simplify] boundary_threshold in a --config file")
+        log.warning(BUDGET_HINT, "a [simplify] boundary_threshold in a --config file",
+                    MAX_SPACING_HINT if options.guard == "max_spacing" else "")
     if args.summary:
         write_json(args.summary, {"input": str(args.input), "version": __version__,
                                   **summary.to_dict(), "exit_code": code})
@@ -398,11 +419,19 @@ def check_memory(name, n, room=None, per_point=PEAK_BYTES_PER_POINT + 24, doing=
                          f"{fix}")
 
 
+def _option_flags(args):
+    """The core options both commands take as flags: ``--edge-angle``, ``--max-spacing``."""
+    flags = {} if args.edge_angle is None else {"edge_angle": args.edge_angle}
+    if args.max_spacing is not None:
+        flags.update(guard="max_spacing", max_spacing=args.max_spacing)
+    return flags
+
+
 def _simplify(args):
     t0 = time.perf_counter()
-    extra = {} if args.edge_angle is None else {"edge_angle": args.edge_angle}
     options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
-                              detect_boundary=not args.no_boundary, **extra)  # before reading
+                              detect_boundary=not args.no_boundary,
+                              **_option_flags(args))  # before reading
     if Path(args.output).suffix.lower() in LAS_SUFFIXES:
         raise FileFormatError(f"{args.output}: simplify writes .npy, .ply, .xyz, .txt or .csv; "
                               f"for a LAS/LAZ output that keeps every input dimension use "
@@ -442,7 +471,8 @@ def _simplify(args):
     log.info("wrote %d of %d points to %s (%.2f s in all)", int(sel.sum()), res.n, args.output,
              time.perf_counter() - t0)
     if not res.reached:
-        log.warning(BUDGET_HINT, "--boundary-threshold T")
+        log.warning(BUDGET_HINT, "--boundary-threshold T",
+                    MAX_SPACING_HINT if options.guard == "max_spacing" else "")
     return EXIT_OK if res.reached else EXIT_BUDGET
 
 
