@@ -88,8 +88,8 @@ def test_cli_exit_codes(cloud, tmp_path, caplog, capsys):
         in caplog.text  # the budget message names the API's option
     assert len(read_points(out)) > 120
     assert not (tmp_path / "missing.ply").exists()
-    with pytest.raises(SystemExit):
-        main(["simplify", str(path), str(out)])  # neither --ratio nor --count
+    assert main(["simplify", str(path), str(out)]) == EXIT_INPUT  # no --ratio, --count
+    assert "or --max-spacing DISTANCE alone" in caplog.text  # (or --max-spacing)
     assert main(["run", str(path), str(tmp_path / "r.npy")]) == EXIT_INPUT  # nor for run
     assert "give --ratio R (a fraction of the points, in (0, 1]) or --count N" in caplog.text
     assert main(["simplify", str(path), str(tmp_path / "out.laz"), "--ratio", "0.5"]) \
@@ -488,8 +488,8 @@ def test_edge_angle_reaches_both_commands(tmp_path, caplog):
 
 def test_max_spacing_reaches_both_commands(cloud, tmp_path, caplog, capsys):
     """``--max-spacing D``: no input point is left farther than D from a kept one, by simplify
-    and by run (more than the count is kept: exit 3, with the flag in the advice); a
-    distance that is not positive is refused by the parser."""
+    and by run (more than the count is kept: exit 3, with the flag in the advice); alone, the
+    same points and exit 0; a distance that is not positive is refused by the parser."""
     from scipy.spatial import cKDTree
     X, path = cloud
     limit = 0.25
@@ -505,6 +505,16 @@ def test_max_spacing_reaches_both_commands(cloud, tmp_path, caplog, capsys):
         with pytest.raises(SystemExit):
             main([command, str(path), str(out), "--ratio", "0.01", "--max-spacing", "0"])
         assert "expected a positive distance" in capsys.readouterr().err
+        # alone: as few points as the limit allows, and that is the count asked for
+        alone = tmp_path / f"{command}_alone.npy"
+        assert main([command, str(path), str(alone), "--max-spacing", str(limit),
+                     "--no-boundary" if command == "simplify" else "-q"]) == EXIT_OK
+        A = np.load(alone)
+        for name in ("x", "y", "z", "sharp_edge"):
+            np.testing.assert_array_equal(A[name], K[name])
+        caplog.clear()
+        assert main([command, str(path), str(alone), "-q"]) == EXIT_INPUT
+        assert "or --max-spacing DISTANCE alone" in caplog.text
 
 
 @pytest.mark.parametrize("command, said, not_said", [

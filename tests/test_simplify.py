@@ -310,6 +310,15 @@ def test_max_spacing_guard_bounds_the_gaps():
     assert simplify_points(plate, count=30).count == 30
     with pytest.raises(InputError, match="max_spacing"):
         SimplifyOptions(guard="max_spacing")
+    # no count asked: as few as the limit allows, and that is the count reached (no warning)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        alone = simplify_points(plate, options=SimplifyOptions(guard="max_spacing",
+                                                               max_spacing=h))
+    assert alone.reached and alone.target == alone.count == len(kept) and not alone.message
+    np.testing.assert_array_equal(alone.keep, res.keep)
+    with pytest.raises(InputError, match=r"Or neither, with options.guard='max_spacing'"):
+        simplify_points(plate)
 
 
 def test_keep_at_below_what_the_run_removed_says_why():

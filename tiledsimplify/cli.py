@@ -50,7 +50,8 @@ EDGE_ANGLE_HELP = ("mode coverage: the least fold of a sharp edge in degrees, ab
                    "too")
 MAX_SPACING_HELP = ("leave no input point farther than DISTANCE (model units) from a kept "
                     "point: removals that would are vetoed, so more than the count may be kept "
-                    "(exit 3); turns off the pre-thinning and the gap refinement")
+                    "(exit 3); alone (no --ratio or --count), keep as few points as that "
+                    "allows. Turns off the pre-thinning and the gap refinement")
 #: the command's words for the budget message's options.boundary_threshold (core/result.py)
 BUDGET_HINT = "on the command line, %s sets options.boundary_threshold%s"
 #: ... and options.max_spacing, where the run had a guard
@@ -141,7 +142,7 @@ def _parser():
     s.add_argument("input", help="LAS/LAZ (file, folder or glob), E57, PLY, OBJ/OFF/STL "
                                  "(vertices), XYZ/CSV/TXT or NPY; .gz allowed")
     s.add_argument("output", help="output .ply, .npy, .xyz or .csv")
-    g = s.add_mutually_exclusive_group(required=True)
+    g = s.add_mutually_exclusive_group()
     g.add_argument("--ratio", type=_ratio, help="fraction of points to keep, in (0, 1]")
     g.add_argument("--count", type=_count, help="number of points to keep")
     s.add_argument("--all-points", action="store_true",
@@ -369,9 +370,11 @@ def _run(args):
     if "ratio" in run_cfg and "count" in run_cfg and (args.ratio is not None
                                                       or args.count is not None):
         run_cfg.pop("count" if args.ratio is not None else "ratio")
-    if "ratio" not in run_cfg and "count" not in run_cfg:  # the API would say "ratio= or count="
+    if ("ratio" not in run_cfg and "count" not in run_cfg and args.max_spacing is None
+            and simplify_cfg.get("guard") != "max_spacing"):  # the API says "ratio= or count="
         raise InputError("give --ratio R (a fraction of the points, in (0, 1]) or --count N, "
-                         "or ratio / count in the [run] table of --config.")
+                         "or ratio / count in the [run] table of --config; or --max-spacing "
+                         "DISTANCE alone to keep as few points as that allows.")
     if args.mode is not None:
         simplify_cfg = {**simplify_cfg, "mode": args.mode}
     simplify_cfg = {**simplify_cfg, **_option_flags(args)}
@@ -432,6 +435,9 @@ def _simplify(args):
     options = SimplifyOptions(mode=args.mode, boundary_threshold=args.boundary_threshold,
                               detect_boundary=not args.no_boundary,
                               **_option_flags(args))  # before reading
+    if args.ratio is None and args.count is None and args.max_spacing is None:
+        raise InputError("give --ratio R (a fraction of the points, in (0, 1]) or --count N; "
+                         "or --max-spacing DISTANCE alone to keep as few points as that allows.")
     if Path(args.output).suffix.lower() in LAS_SUFFIXES:
         raise FileFormatError(f"{args.output}: simplify writes .npy, .ply, .xyz, .txt or .csv; "
                               f"for a LAS/LAZ output that keeps every input dimension use "

@@ -29,7 +29,8 @@ class SimplifyResult:
         The full progressive removal sequence (past the target if ``options.progressive``):
         point ids and their importance at removal.
     target : int
-        The requested count; ``count`` the number actually kept; ``reached`` whether they are
+        The requested count (with only a ``max_spacing`` guard and no count asked, the count
+        the guard reached); ``count`` the number actually kept; ``reached`` whether they are
         equal, and ``message`` why not.
     """
 
@@ -97,7 +98,9 @@ def resolve_target(n, ratio, count):
     if (ratio is None) == (count is None):
         raise InputError("give exactly one of ratio= (fraction of points to keep, in (0, 1]) "
                          f"or count= (number of points to keep); got ratio={ratio!r}, "
-                         f"count={count!r}.")
+                         f"count={count!r}." + (
+                             " (Or neither, with options.guard='max_spacing': as few points as "
+                             "options.max_spacing allows.)" if ratio is None else ""))
     if ratio is not None:
         r = float(ratio)
         if not 0.0 < r <= 1.0:

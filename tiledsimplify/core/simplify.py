@@ -283,7 +283,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         with importance 0 — unless they are frozen or boundary points, which are always kept.
         NaN or infinite coordinates are an error.
     ratio : float in (0, 1], optional
-        Fraction of the points to keep. Give this or ``count``.
+        Fraction of the points to keep. Give this or ``count`` — or neither, with
+        ``options.guard="max_spacing"``: then as few as that limit allows (the result's
+        ``target`` is the count reached).
     count : int, optional
         Number of points to keep.
     frozen : bool array (n,), optional
@@ -339,7 +341,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     X, frozen = _validate(xyz, frozen)
     n = X.shape[0]
     covered = None if covered is None else _mask(covered, n, "covered")
-    target = resolve_target(n, ratio, count)
+    # the max_spacing guard alone: as few points as the limit allows (the guard sets the count)
+    by_guard = ratio is None and count is None and options.guard == "max_spacing"
+    target = 0 if by_guard else resolve_target(n, ratio, count)
     stats = {"n_input": n}
     clock = time.perf_counter()
 
@@ -475,7 +479,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         stats.update({f"refine_{key}": value for key, value in info.items()})
         lap("refine")
     message = ""
-    if cut < n_remove:
+    if by_guard:
+        target = n - cut  # what the limit allows is the count asked for
+    elif cut < n_remove:
         n_b = int(boundary.sum())
         n_f = int(frozen.sum())
         n_g = n - order.size - int((boundary | frozen).sum())

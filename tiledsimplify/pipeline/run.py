@@ -751,7 +751,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         from other input it is LAS 1.4 point format 6 at scales of a thousandth of the
         spacing; both add ``sharp_edge``, ``importance``, ``simplify_rank``), or
         ``.ply``/``.npy``/``.xyz``/``.csv``.
-    ratio, count : exactly one — the fraction or number of points to keep overall.
+    ratio, count : exactly one — the fraction or number of points to keep overall; or
+        neither, with ``options.guard="max_spacing"``: as few as that limit allows (the
+        summary's ``target`` is then the count reached).
     options : SimplifyOptions or dict, optional
         Core options. Mode ``"paper"`` finds one boundary threshold for all tiles in a
         first pass (a fixed ``boundary_threshold`` skips it); every mode gets one point
@@ -805,7 +807,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     if n == 0:
         raise InputError(f"{input}: the input has no points; nothing to simplify. Check that it "
                          "is the file (or glob) you meant.")
-    target = resolve_target(n, ratio, count)
+    # the max_spacing guard alone: as few points as the limit allows (the guard sets the count)
+    by_guard = ratio is None and count is None and options.guard == "max_spacing"
+    target = 0 if by_guard else resolve_target(n, ratio, count)
     if client is None:
         _check_scheduler(scheduler)  # before the ingest, not at the first stage
     if not 0.0 < float(floor) < 1.0:
@@ -998,6 +1002,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         held.close()
     seconds["total"] = time.perf_counter() - t_start
     cpu_seconds["total"] = sum(cpu_seconds.values())
+    if by_guard:
+        target = n - n_removed  # what the limit allows is the count asked for
     reached = n - n_removed == target
     # short: every tile ran to its end, so what is left is boundary points and vetoed ones
     message = "" if reached else short_message(target, n, n_out, n_out, n_boundary,
