@@ -332,11 +332,14 @@ def test_max_spacing_holds_across_tiles(bunny, tmp_path):
     assert not s.reached and "vetoed by the max_spacing guard" in s.message
     assert s.n_tiles >= 3 and len(K) == s.n_output > 0.01 * len(X)
     assert cKDTree(K).query(X)[0].max() <= limit
-    # no count asked: as few as the limit allows — the same points, and the count reached
+    # no count asked: as few as the limit allows (about as many), and that is the count
     alone = run(path, tmp_path / "a.npy", tile_points=2500, workers=2, progress=False,
                 options=SimplifyOptions(guard="max_spacing", max_spacing=limit))
-    assert alone.reached and alone.target == alone.n_output == s.n_output and not alone.message
-    np.testing.assert_array_equal(np.load(tmp_path / "a.npy"), out)
+    out = np.load(tmp_path / "a.npy")
+    K = np.c_[out["x"], out["y"], out["z"]]
+    assert alone.reached and alone.target == alone.n_output == len(K) and not alone.message
+    assert abs(alone.n_output - s.n_output) < 0.05 * s.n_output
+    assert cKDTree(K).query(X)[0].max() <= limit
 
 
 def test_a_short_run_says_why_as_the_core_does(bunny, tmp_path):

@@ -5,7 +5,7 @@ import naive
 import numpy as np
 import pytest
 
-from tiledsimplify import BudgetWarning, SimplifyOptions, simplify_points
+from tiledsimplify import SimplifyOptions, simplify_points
 from tiledsimplify.core import prethin
 from tiledsimplify.core.refine import protected
 from tiledsimplify.core.simplify import median_spacing, neighbourhoods
@@ -160,16 +160,29 @@ def test_prethin_option_checked(bad):
         SimplifyOptions(prethin=bad)
 
 
-def test_prethin_off_with_a_guard():
-    """The sample would remove points the guard vetoes (it spaces them wider than
-    ``max_spacing``): a guarded run is not thinned and keeps the guard's floor."""
-    X = _plane(3000, seed=9)
-    spacing = median_spacing(X)
-    with pytest.warns(BudgetWarning, match="vetoed by the max_spacing guard"):
-        res = simplify_points(X, 0.05, options=SimplifyOptions(guard="max_spacing",
-                                                               max_spacing=2 * spacing))
-    assert "n_prethin_subset" not in res.stats
-    assert SimplifyOptions(guard="max_spacing", max_spacing=1.0, prethin=3).prethin_factor == 0
+def test_prethin_with_a_guard_starts_every_thinned_point_covered():
+    """With a ``max_spacing`` guard the disks are at most half the limit and every thinned
+    point starts in the cover list of its nearest kept point: the bound holds as without the
+    pre-thinning (and about as many points are kept), but the greedy removes a fraction."""
+    from scipy.spatial import cKDTree
+    X = _plane(6000, seed=9)
+    limit = 4 * median_spacing(X)
+    runs = {}
+    for factor in (0, None):
+        runs[factor] = simplify_points(X, options=SimplifyOptions(
+            guard="max_spacing", max_spacing=limit, prethin=factor))
+        assert cKDTree(X[runs[factor].keep]).query(X)[0].max() <= limit
+    thinned, whole = runs[None], runs[0]
+    assert "n_prethin_subset" not in whole.stats
+    assert thinned.stats["n_prethin_subset"] < 0.5 * len(X)
+    assert abs(thinned.count - whole.count) < 0.05 * whole.count
+    # a subset point that may not cover (a tile's halo) leaves its disk's points uncovered:
+    # they go back into the subset (prethin.covered_by)
+    keep = np.array([True, False, False, True, False])
+    P = np.c_[np.arange(5.0), np.zeros(5), np.zeros(5)]
+    owner = prethin.covered_by(P, keep, np.array([False, True, True, True, True]), 1.5)
+    assert keep.tolist() == [True, True, False, True, False]  # 1: 2 from 3, and 0 may not
+    assert owner.tolist() == [-1, -1, 3, -1, 3]
 
 
 def test_prethin_defaults_by_mode():

@@ -50,8 +50,9 @@ def _reach(X, spacings):
 
 
 def _no_guard(X):
-    """``covers`` and ``owners`` of :func:`remove_points` for a run without a guard."""
-    return np.ones(len(X), dtype=bool), np.full((2, len(X)), -1, dtype=np.int64)
+    """``covers``, ``owners`` and ``cover_xyz`` of :func:`remove_points` for a run without a
+    guard (never read)."""
+    return np.ones(0, dtype=bool), np.full((2, 0), -1, dtype=np.int64), np.empty((0, 3))
 
 
 def _state(X, code=0, weight=0.0, reach=np.inf):
@@ -250,14 +251,16 @@ def test_max_spacing_leaves_no_point_farther_than_the_limit(kind, data_dir):
 
 def test_a_guard_that_never_vetoes_removes_as_the_greedy_does():
     """A limit no gap reaches: the same sequence as the greedy without a guard (the guard
-    also turns off the pre-thinning and the refinement, so those are off there too) until
-    the last few points, which no remaining point can cover."""
+    turns off the refinement, so it is off there too), with and without the pre-thinning
+    (its disks capped at half the limit: no cap here), until the last few points, which no
+    remaining point can cover."""
     from tiledsimplify import SimplifyOptions, simplify_points
     X = _cloud("wavy", 1500)
-    guarded = simplify_points(X, 0.1, options=SimplifyOptions(guard="max_spacing",
-                                                              max_spacing=1e6))
-    free = simplify_points(X, 0.1, options=SimplifyOptions(prethin=0, refine=False))
-    # run on to the end, the last few points have no cover left to hand theirs to
-    assert guarded.reached and len(free.order) - 10 < len(guarded.order) < len(free.order)
-    np.testing.assert_array_equal(guarded.order[:1400], free.order[:1400])
-    np.testing.assert_array_equal(guarded.keep, free.keep)
+    for prethin in (0, None):
+        guarded = simplify_points(X, 0.1, options=SimplifyOptions(
+            guard="max_spacing", max_spacing=1e6, prethin=prethin))
+        free = simplify_points(X, 0.1, options=SimplifyOptions(prethin=prethin, refine=False))
+        assert ("n_prethin_subset" in guarded.stats) == (prethin is None)
+        assert guarded.reached and len(free.order) - 10 < len(guarded.order) < len(free.order)
+        np.testing.assert_array_equal(guarded.order[:1400], free.order[:1400])
+        np.testing.assert_array_equal(guarded.keep, free.keep)

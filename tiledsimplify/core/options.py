@@ -145,7 +145,9 @@ class SimplifyOptions:
         subset would be at most half the cloud (:data:`~tiledsimplify.core.prethin.MAX_SHARE`;
         at 2, targets up to a quarter): above that it costs what it saves. 0: off (every
         removal by the greedy, as the paper does). None: the mode's default (``"coverage"``: 2;
-        ``"paper"``: 0). Off with a ``guard`` (the sample would not respect its veto). Counts
+        ``"paper"``: 0). With a ``max_spacing`` guard the disks are at most
+        ``prethin.GUARD_RADIUS`` of the limit, and each thinned point starts covered by its
+        nearest kept one (:func:`tiledsimplify.core.prethin.covered_by`). Counts
         above the subset's (:meth:`SimplifyResult.keep_at`) come from
         the sample, not the greedy.
     """
@@ -240,10 +242,8 @@ class SimplifyOptions:
 
     @property
     def prethin_factor(self):
-        """The pre-thinning's multiple of the target: the option, else the mode's; 0 (off)
-        with a guard, whose veto the sample would not respect."""
-        if self.guard != "none":
-            return 0.0
+        """The pre-thinning's multiple of the target: the option, else the mode's (with a
+        ``max_spacing`` guard its disks are at most ``prethin.GUARD_RADIUS`` of the limit)."""
         if self.prethin is not None:
             return float(self.prethin)
         return 0.0 if self.mode == "paper" else PRETHIN

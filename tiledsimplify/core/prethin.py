@@ -35,6 +35,14 @@ import numpy as np
 
 from ._jit import jit
 
+#: with a ``max_spacing`` guard, the sample's radius is at most this share of the limit (and
+#: just that when no count is asked): every thinned point then starts covered, and the greedy
+#: still chooses among points closer than the limit. Measured (2026-12-04, no count asked, the
+#: 300k-point scan of ``benchmarks/core_speed.py`` at limits of 3 / 5 spacings): 0.35 — 7.41 /
+#: 4.97 s, mean surface error 0.758 / 1.013 (1e-4 of the diagonal; at 3 spacings the subset
+#: would be above ``MAX_SHARE``: not thinned); 0.5 — 5.05 / 4.52 s, 0.768 / 1.018; 0.7 — 4.20
+#: / 4.28 s, 0.775 / 1.037; counts within 0.4 %; on the Bunny mean error within ±1 % either way
+GUARD_RADIUS = 0.5
 #: the largest subset, as a share of the cloud, worth thinning to: the subset's own
 #: neighbourhoods cost ~10 µs a point and the sample ~2 µs a point of the cloud, against ~20 µs
 #: for each removal saved, so the pre-thinning pays below ~0.6 of the cloud. Measured at 0.6
@@ -104,18 +112,27 @@ def disk_sample(X, start, cnt, pool, fixed, order, r, keep, stamp, stack):
     return kept
 
 
-def subset(X, start, cnt, pool, fixed, goal, spacing, tie, least=0, first=None):
+def subset(X, start, cnt, pool, fixed, goal, spacing, tie, least=0, first=None,
+           max_radius=math.inf):
     """About ``goal`` points of ``X``: every ``fixed`` one and a disk sample of the rest, in
     blocks of :data:`BLOCK` consecutive points, each in the order of ``tie``
     (:func:`disk_sample` over the graph ``(start, cnt, pool)``), the points of ``first``
-    (bool, optional) before the others.
+    (bool, optional) before the others. The disk's radius is at most ``max_radius`` (a
+    ``max_spacing`` guard's share: then every thinned point lies within it of a kept one);
+    with ``goal`` None it is that radius.
 
-    Returns the bool mask of the subset, or None — nothing is thinned — when the goal is
-    above :data:`MAX_SHARE` of the cloud (it would not pay), when the fixed points alone reach
-    it, or when the closest sample found keeps fewer than ``least`` points.
+    Returns the bool mask of the subset, or None — nothing is thinned — when the goal (or the
+    sample at ``max_radius``) is above :data:`MAX_SHARE` of the cloud (it would not pay), when
+    the fixed points alone reach it, or when the closest sample found keeps fewer than
+    ``least`` points.
     """
     n = X.shape[0]
     n_fixed = int(fixed.sum())
+    by_radius = goal is None
+    if by_radius:
+        if not (math.isfinite(max_radius) and max_radius > 0):
+            return None
+        goal = n_fixed + 1  # as far as the radius goes
     free_goal = goal - n_fixed
     if free_goal <= 0 or goal > MAX_SHARE * n or not spacing > 0:
         return None
@@ -127,18 +144,62 @@ def subset(X, start, cnt, pool, fixed, goal, spacing, tie, least=0, first=None):
     stack = np.empty(n, dtype=np.int64)
     # first guess: a disk of radius r on a surface of spacing s holds ~ pi (r / s)^2 points;
     # then secant steps on log(count) against log(r) (scan lines are far from that model)
-    r = spacing * math.sqrt((n - n_fixed) / (math.pi * free_goal))
+    r = min(spacing * math.sqrt((n - n_fixed) / (math.pi * free_goal)), max_radius)
     best, last = None, None
     for _ in range(MAX_STEPS):
         k = disk_sample(X, start, cnt, pool, fixed, order, r, keep, stamp, stack) - n_fixed
         if best is None or abs(k - free_goal) < abs(best[0] - free_goal):
             best = (k, keep.copy())
-        if abs(k - free_goal) <= TOLERANCE * free_goal:
-            break
+        if abs(k - free_goal) <= TOLERANCE * free_goal or (r == max_radius and k >= free_goal):
+            break  # near the goal, or as far as the radius may go
         slope = -2.0  # d log(count) / d log(r) of the model
         if last is not None and k > 0 and last[1] > 0 and last[1] != k:
             slope = min(-0.5, max(-4.0, math.log(k / last[1]) / math.log(r / last[0])))
         last = (r, k)
-        r *= (free_goal / k) ** (1.0 / slope) if k > 0 else 0.5
+        r = min(r * ((free_goal / k) ** (1.0 / slope) if k > 0 else 0.5), max_radius)
     k, mask = best
-    return None if n_fixed + k < least else mask
+    if n_fixed + k < least or (by_radius and n_fixed + k > MAX_SHARE * n):
+        return None
+    return mask
+
+
+def covered_by(X, keep, covers, limit):
+    """For a ``max_spacing`` guard: the cover of every thinned point (``~keep``) that needs one
+    (``covers``, bool or None for all) — its nearest kept point that may cover, within
+    ``limit`` — as an index into ``X``, ``-1`` elsewhere. A thinned point with none within
+    the limit (a tile's point whose disk was a halo point's) goes back into ``keep``
+    (changed in place) and covers itself."""
+    from scipy.spatial import cKDTree
+
+    n = X.shape[0]
+    owner = np.full(n, -1, dtype=np.int64)
+    can = keep if covers is None else keep & covers
+    need = ~keep if covers is None else ~keep & covers
+    ids = np.flatnonzero(need)
+    pool = np.flatnonzero(can)
+    if ids.size == 0:
+        return owner
+    if pool.size == 0:
+        keep[ids] = True
+        return owner
+    d, j = cKDTree(X[pool]).query(X[ids])
+    ok = d <= limit
+    owner[ids[ok]] = pool[j[ok]]
+    keep[ids[~ok]] = True
+    return owner
+
+
+def link_covers(owners, members, cover):
+    """Hand each of ``members`` to its ``cover`` (``-1``: none) in the guard's cover lists
+    ``owners`` (:func:`tiledsimplify.core.removal.guard_allows`): ``owners[0, c]`` the first
+    point ``c`` covers, ``owners[1, x]`` the next after ``x``."""
+    has = cover >= 0
+    members, cover = members[has], cover[has]
+    order = np.argsort(cover, kind="stable")
+    members, cover = members[order], cover[order]
+    same = cover[1:] == cover[:-1]
+    after = np.full(members.size, -1, dtype=np.int64)
+    after[:-1][same] = members[1:][same]
+    owners[1, members] = after
+    first = np.r_[True, ~same] if members.size else np.zeros(0, dtype=bool)
+    owners[0, cover[first]] = members[first]

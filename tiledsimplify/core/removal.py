@@ -113,7 +113,8 @@ def pass_on_cover(X, p, start, cnt, pool, covers, owners):
 @jit
 def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable,
                   boundary, removable, importance, tie, code, weight, guard, guard_value, covers,
-                  owners, n_steps, half, tol, reach, update_normals=True, stop_above=math.inf):
+                  owners, cover_xyz, n_steps, half, tol, reach, update_normals=True,
+                  stop_above=math.inf):
     """Remove up to ``n_steps`` points, least important first.
 
     Mutates the neighbour lists, local meshes, normals and importance in place (for the
@@ -128,9 +129,10 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     ``tie`` (uint64) breaks importance ties (see :mod:`.heap`); ``code`` and ``weight`` select the
     importance measure (:func:`.importance.importance_of`). ``guard`` / ``guard_value``
     select a guard rule (:data:`GUARDS`) that can veto a removal; a vetoed point is kept.
-    ``covers`` (bool) and ``owners`` (int64 (2, n), ``-1`` at the start, kept between calls)
-    are the ``max_spacing`` guard's: which points cover and need cover, and who covers whom
-    (:func:`guard_allows`).
+    ``covers`` (bool (n,)), ``owners`` (int64 (2, N), ``-1`` at the start, kept between calls)
+    and ``cover_xyz`` ((N, 3): ``X`` and after it the points a pre-thinning took out, which
+    ``owners`` may already hand to covers) are the ``max_spacing`` guard's: which points cover
+    and need cover, who covers whom, and where they all are (:func:`guard_allows`).
     The loop also stops right after a removal whose importance exceeds ``stop_above``: the
     recorded sequence then holds every step whose running maximum of importance at removal is
     at most ``stop_above`` (the prefix does not depend on where the loop stops).
@@ -171,7 +173,8 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
     while True:
         status = _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable,
                       boundary, removable, importance, tie, code, weight, guard, guard_value,
-                      covers, owners, n_steps, half, tol, reach, update_normals, stop_above, hp,
+                      covers, owners, cover_xyz, n_steps, half, tol, reach, update_normals,
+                      stop_above, hp,
                       pos, order, at, stamp, mark, mesh_changed, normal_changed, before, link,
                       cand, bufs, lbufs, frame, fbufs, mbufs, newdn, nvec, wvec, state)
         if status == DONE:
@@ -204,8 +207,8 @@ STEP, SIZE, NEED_LINK, NEED_MESH, NEED_POOL = range(5)
 
 @jit_leaf
 def _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable, boundary,
-         removable, importance, tie, code, weight, guard, guard_value, covers, owners, n_steps,
-         half, tol, reach, update_normals, stop_above, hp, pos, order, at, stamp, mark, mesh_changed,
+         removable, importance, tie, code, weight, guard, guard_value, covers, owners, cover_xyz,
+         n_steps, half, tol, reach, update_normals, stop_above, hp, pos, order, at, stamp, mark, mesh_changed,
          normal_changed, before, link, cand, bufs, lbufs, frame, fbufs, mbufs, newdn, nvec, wvec,
          state):
     """The removal loop of :func:`remove_points`, from step ``state[STEP]``.
@@ -237,10 +240,10 @@ def _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, sta
         p = heap.pop(hp, pos, importance, tie, size)
         size -= 1
         removable[p] = False
-        if not guard_allows(guard, guard_value, X, p, start, cnt, pool, covers, owners):
+        if not guard_allows(guard, guard_value, cover_xyz, p, start, cnt, pool, covers, owners):
             continue  # kept for good: removals only take covers away
         if guard == 1:
-            pass_on_cover(X, p, start, cnt, pool, covers, owners)
+            pass_on_cover(cover_xyz, p, start, cnt, pool, covers, owners)
         order[step] = p
         at[step] = importance[p]
         # -- 1. Voronoi neighbourhoods

@@ -402,16 +402,24 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     # 4b. beyond the paper: thin the smooth points to a multiple of the target first
     thinned = np.zeros(0, dtype=np.int64)
     sub = None
+    guarded = options.guard == "max_spacing"
+    covers_u = None if covered is None else covered[rep]
     if options.prethin_factor and (to_target > 0 or prethin_target is not None):
         # the subset holds at least ``aim`` points; with ``prethin_target`` it is the same
         # for every count asked (the passes over one tile agree)
         aim = m - to_target if prethin_target is None else int(prethin_target)
         # boundary and frozen points all stay; the ones the refinement protects are drawn
-        # first but thinned like the rest (28 % of the noisy tray scan, see prethin)
+        # first but thinned like the rest (28 % of the noisy tray scan, see prethin). With a
+        # max_spacing guard the disk is at most a share of the limit (and just that with no
+        # count to aim at), so that every thinned point starts covered
+        cap = prethin_mod.GUARD_RADIUS * options.max_spacing if guarded else math.inf
         sub = prethin_mod.subset(Xu, st.start, st.cnt, st.pool, never_u,
-                                 math.ceil(options.prethin_factor * aim),
+                                 math.ceil(options.prethin_factor * aim)
+                                 if aim > 0 or not guarded else None,
                                  spacing if spacing is not None else median_spacing(Xu), tie,
-                                 least=aim, first=fixed_u & ~never_u)
+                                 least=aim, first=fixed_u & ~never_u, max_radius=cap)
+        if sub is not None and guarded:
+            owner_u = prethin_mod.covered_by(Xu, sub, covers_u, options.max_spacing)
     if sub is not None:
         thinned = np.flatnonzero(~sub)
         thinned = thinned[np.argsort(tie[thinned], kind="stable")]
@@ -426,11 +434,20 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     else:
         Xg, boundary_g, tie_g, alive = Xu, boundary_u, tie, ~never_u
     lap("prethin")
-    # the max_spacing guard's cover lists (removal.guard_allows; empty, unread, without it)
-    m_guard = Xg.shape[0] if options.guard == "max_spacing" else 0
-    covers_g = (np.ones(m_guard, dtype=bool) if covered is None or not m_guard
-                else covered[rep] if sub is None else covered[rep][keep_ids])
-    owners = np.full((2, m_guard), -1, dtype=np.int64)
+    # the max_spacing guard's cover lists (removal.guard_allows; empty, unread, without it):
+    # the subset's points, then the thinned ones, each already handed to its nearest cover
+    m_guard = Xg.shape[0] if guarded else 0
+    covers_g = (np.ones(m_guard, dtype=bool) if covers_u is None or not m_guard
+                else covers_u if sub is None else covers_u[keep_ids])
+    owners = np.full((2, m_guard + (thinned.size if guarded else 0)), -1, dtype=np.int64)
+    cover_xyz = Xg[:m_guard]
+    if guarded and thinned.size:
+        cover_xyz = np.concatenate([Xg, Xu[thinned]])
+        slot = np.full(m, -1, dtype=np.int64)  # a point's index among the subset's
+        slot[keep_ids] = np.arange(keep_ids.size)
+        cover_of = owner_u[thinned]
+        prethin_mod.link_covers(owners, m_guard + np.arange(thinned.size),
+                                np.where(cover_of >= 0, slot[cover_of], -1))
     imp_u = np.zeros(Xg.shape[0])
     all_importance(code, Xg, st.normals, boundary_g, st.dn, st.dn_cnt, weight, imp_u)
     lap("importance")
@@ -441,8 +458,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         order_k, at_k, st.pool = remove_points(
             Xg, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
             st.normals, st.stable, boundary_g, alive, imp_u, tie_g, code, weight,
-            GUARDS[options.guard], float(options.max_spacing or 0.0), covers_g, owners, n_steps,
-            BOX_FACTOR * D,
+            GUARDS[options.guard], float(options.max_spacing or 0.0), covers_g, owners,
+            cover_xyz, n_steps, BOX_FACTOR * D,
             TOL_FACTOR * D, st.reach, options.update_normals, stop_above)
         return (order_k if sub is None else keep_ids[order_k]), at_k
 

@@ -842,6 +842,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     if options.prethin_factor:  # the tiles' sequences then depend on the target: a resumed
         settings["target"] = int(target)  # run must ask for the same, thinned the same way
         settings["prethin"] = {"factor": options.prethin_factor, "scheme": prethin.SCHEME}
+        if options.guard == "max_spacing":  # the disks are a share of the limit
+            settings["prethin"]["guard_radius"] = prethin.GUARD_RADIUS
     fp = _fingerprint(source, settings)
 
     held = contextlib.ExitStack()  # closed at the end: the lock, the temporary store, a client
