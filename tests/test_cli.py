@@ -529,3 +529,20 @@ def test_help_says_the_defaults_the_readme_gives(capsys, command, said, not_said
         main([command, "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert said in text and not_said not in text
+
+
+@pytest.mark.parametrize("preset", sorted((Path(__file__).resolve().parents[1]
+                                           / "configs").glob("*.toml")))
+def test_presets_load_with_and_without_their_commented_options(preset, tmp_path):
+    """Every preset in configs/ is valid as shipped, and with its commented-out options
+    (``# key = value`` lines) switched on: a typo there would fail only on a user's run."""
+    from tiledsimplify.cli import RUN_KEYS, _load_config
+    from tiledsimplify.core import SimplifyOptions
+    on = tmp_path / preset.name
+    on.write_text("".join(line[2:] if line.startswith("# ") and " = " in line else line
+                          for line in preset.read_text().splitlines(keepends=True)))
+    for path in (preset, on):
+        run_cfg, simplify_cfg = _load_config(path)
+        assert set(run_cfg) <= set(RUN_KEYS) and run_cfg
+        SimplifyOptions.from_mapping(simplify_cfg)
+    assert SimplifyOptions.from_mapping(_load_config(on)[1]).guard == "max_spacing"
