@@ -201,7 +201,8 @@ def test_room_grown_between_removals_gives_the_same_sequence(monkeypatch):
         runs.append(remove_points(
             X, st.start, st.cnt, st.cap, st.pool, st.meta, st.dn, st.dn_cnt, st.plane_normals,
             st.normals, st.stable, flags, removable, imp, heap.coordinate_hash(X), 0, 0.0, 0,
-            0.0, *_no_guard(X), int(removable.sum()) - 10, BOX_FACTOR * D, TOL_FACTOR * D, np.inf, False))
+            0.0, *_no_guard(X), int(removable.sum()) - 10, BOX_FACTOR * D, TOL_FACTOR * D,
+            np.inf, False))
     (o1, a1, p1), (o2, a2, p2) = runs
     assert len(o1) > 200 and p2.size > p1.size // 4
     assert p2.size > sizes  # the packed run's pool was grown between removals

@@ -174,9 +174,9 @@ def remove_points(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, nor
         status = _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable,
                       boundary, removable, importance, tie, code, weight, guard, guard_value,
                       covers, owners, cover_xyz, n_steps, half, tol, reach, update_normals,
-                      stop_above, hp,
-                      pos, order, at, stamp, mark, mesh_changed, normal_changed, before, link,
-                      cand, bufs, lbufs, frame, fbufs, mbufs, newdn, nvec, wvec, state)
+                      stop_above, hp, pos, order, at, stamp, mark, mesh_changed, normal_changed,
+                      before, link, cand, bufs, lbufs, frame, fbufs, mbufs, newdn, nvec, wvec,
+                      state)
         if status == DONE:
             break
         if status == NO_ROOM:
@@ -208,9 +208,9 @@ STEP, SIZE, NEED_LINK, NEED_MESH, NEED_POOL = range(5)
 @jit_leaf
 def _run(X, start, cnt, cap, pool, meta, dn, dn_cnt, plane_normals, normals, stable, boundary,
          removable, importance, tie, code, weight, guard, guard_value, covers, owners, cover_xyz,
-         n_steps, half, tol, reach, update_normals, stop_above, hp, pos, order, at, stamp, mark, mesh_changed,
-         normal_changed, before, link, cand, bufs, lbufs, frame, fbufs, mbufs, newdn, nvec, wvec,
-         state):
+         n_steps, half, tol, reach, update_normals, stop_above, hp, pos, order, at, stamp, mark,
+         mesh_changed, normal_changed, before, link, cand, bufs, lbufs, frame, fbufs, mbufs, newdn,
+         nvec, wvec, state):
     """The removal loop of :func:`remove_points`, from step ``state[STEP]``.
 
     It replaces no array: before each removal it checks that the scratch buffers and the pool
