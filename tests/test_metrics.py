@@ -405,8 +405,8 @@ def test_evaluate_keys_and_values():
     r = M.evaluate(original, mask, edge_samples=samples, edge_segments=seg, flagged=flagged)
     assert set(r) == {
         "n_original", "n_kept", "surface_error_mean", "surface_error_max", "chamfer",
-        "hausdorff", "edge_coverage", "boundary_precision", "boundary_recall",
-        "boundary_f1", "adaptivity",
+        "hausdorff", "hausdorff_model_units", "diagonal", "edge_coverage",
+        "boundary_precision", "boundary_recall", "boundary_f1", "adaptivity",
     }
     assert all(isinstance(v, float) for v in r.values())
     assert r["n_original"] == len(original) and r["n_kept"] == mask.sum()
@@ -452,7 +452,11 @@ def test_metrics_mask_equals_points_individually():
 def test_evaluate_omits_what_cannot_be_computed():
     plane = grid_plane(5, 5)
     r = M.evaluate(plane, plane[:2])  # 2 kept: no plane fit; flat: no adaptivity; no edges
-    assert set(r) == {"n_original", "n_kept", "chamfer", "hausdorff"}
+    assert set(r) == {"n_original", "n_kept", "chamfer", "hausdorff", "hausdorff_model_units",
+                      "diagonal"}
+    far = max(min(np.linalg.norm(p - q) for q in plane[:2]) for p in plane)  # brute force
+    assert r["hausdorff_model_units"] == pytest.approx(far, rel=1e-12)
+    assert r["hausdorff"] * r["diagonal"] == pytest.approx(far, rel=1e-12)
     r = M.evaluate(plane, plane[::3], edge_samples=plane[:3])  # no flagged -> no P/R
     assert "edge_coverage" in r and "boundary_f1" not in r
     assert r["surface_error_max"] < 1e-14

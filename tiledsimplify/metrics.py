@@ -1074,7 +1074,9 @@ def evaluate(
     Returns
     -------
     dict of str to float
-        Always: ``n_original``, ``n_kept``, ``chamfer``, ``hausdorff``.
+        Always: ``n_original``, ``n_kept``, ``chamfer``, ``hausdorff``, and
+        ``hausdorff_model_units``: the same distance in the input's units (what
+        ``max_spacing`` bounds), with ``diagonal``, the diagonal the others are divided by.
         ``surface_error_mean``, ``surface_error_max``: if at least 3 points are kept.
         ``edge_coverage``: if edge samples or segments are given (radius 1.5 s).
         ``boundary_precision``, ``boundary_recall``, ``boundary_f1``: if
@@ -1122,6 +1124,8 @@ def evaluate(
     d_ok, d_ko = _nn_both_ways(orig, kept_pts, kept_tree=kept_tree)
     result["chamfer"] = float((d_ok.mean() + d_ko.mean()) / diag)
     result["hausdorff"] = float(d_ok.max() / diag)
+    result["hausdorff_model_units"] = float(d_ok.max())
+    result["diagonal"] = float(diag)
 
     if have_edges:
         assert s is not None

@@ -41,6 +41,9 @@ METRIC_LABELS = {
     "surface_error_mean": ("mean surface error (Pauly et al. 2002)", True),
     "surface_error_max": ("max surface error", True),
     "hausdorff": ("Hausdorff, original -> kept", True),
+    "hausdorff_model_units": ("Hausdorff in the input's units (what --max-spacing bounds)",
+                              False),
+    "diagonal": ("bounding-box diagonal, input's units", False),
     "chamfer": ("Chamfer", True),
     "edge_coverage": ("sharp-edge coverage (1.5 spacings)", False),
     "boundary_precision": ("boundary precision", False),
@@ -312,7 +315,7 @@ def _markdown(input_path, result_path, rep, files, mesh):
     lines += ["", "![(a) original, (b) sharp-edge points, (c) simplified](overview.png)", ""]
     lines += ["## Quality", "",
               "Distances are divided by the input's bounding-box diagonal "
-              "(`tiledsimplify.metrics.evaluate`).", "",
+              "(`tiledsimplify.metrics.evaluate`), but where the input's units are said.", "",
               "| measure | key | value |", "|---|---|---:|"]
     for key, value in rep.metrics.items():
         label, _ = METRIC_LABELS.get(key, (key, False))
