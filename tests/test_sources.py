@@ -184,9 +184,12 @@ def test_non_finite_points_fail_naming_the_file_and_the_point(tmp_path, cloud, s
     src = open_source(path, chunk_points=100)
     chunks = src.chunks()
     assert next(chunks)[0] == 0 and next(chunks)[0] == 100  # points before the bad one pass
-    with pytest.raises(InputError, match=rf"n\{suffix}: point 257 has a NaN or infinite"):
-        next(chunks)
-    with pytest.raises(InputError, match=r"point 257 .*\(2 in points 0-999\)"):
+    head = int(not path.read_bytes()[:1].isdigit()) if suffix == ".xyz" else 0  # a header
+    where = f"line {257 + head + 1} \\(point 257\\)" if suffix == ".xyz" else "point 257"
+    with pytest.raises(InputError, match=rf"n\{suffix}: {where} has a NaN or infinite"):
+        next(chunks)  # a text file's error names the line (since 2026-12-04)
+    more = r"\(2 such lines in lines" if suffix == ".xyz" else r"\(2 in points 0-999\)"
+    with pytest.raises(InputError, match=rf"point 257\)? .*{more}"):
         list(open_source(path, chunk_points=1000).chunks())
 
 
@@ -296,3 +299,24 @@ def test_a_coloured_ply_keeps_its_colour_in_a_las_output(tmp_path):
     write_points(plain, X)
     run(plain, tmp_path / "plain.laz", ratio=0.25, tile_points=1500)
     assert laspy.read(tmp_path / "plain.laz").header.point_format.id == 6
+
+
+def test_semicolon_csv_reads_as_comma_csv(tmp_path, cloud):
+    """CSV with semicolons (CloudCompare's export option, spreadsheets in many locales), with
+    and without a header, reads as the comma file does (it was a header line, then 'could not
+    convert'); decimal commas are named; a NaN is named by its line, not a point index."""
+    rows = [";".join(repr(v) for v in p) for p in cloud.tolist()]
+    for name, text in {"s.csv": "\n".join(rows) + "\n",
+                       "h.csv": "x;y;z\n" + "\n".join(rows) + "\n"}.items():
+        (tmp_path / name).write_text(text)
+        for chunk in (100, 10_000):
+            src, xyz = _chunked(tmp_path / name, chunk)
+            assert src.count == len(cloud)
+            np.testing.assert_array_equal(xyz, cloud)
+    (tmp_path / "d.csv").write_text("x;y;z\n1,5;2,5;3,5\n")
+    with pytest.raises(FileFormatError, match=r"line 2 \(point 0\).*decimal commas are not read"):
+        list(open_source(tmp_path / "d.csv").chunks())
+    (tmp_path / "n.xyz").write_text("x y z\n1 2 3\n\n4 nan 6\n7 8 inf\n")
+    with pytest.raises(InputError, match=r"n.xyz: line 4 \(point 1\) has a NaN or infinite "
+                                         r"coordinate: '4 nan 6' \(2 such lines"):
+        list(open_source(tmp_path / "n.xyz", chunk_points=10).chunks())

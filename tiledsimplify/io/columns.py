@@ -85,7 +85,7 @@ def read_columns(path):
         skip, delimiter = _text_header(path)
         if skip:
             with open(path, encoding="ascii", errors="replace") as fh:
-                names = fh.readline().replace(",", " ").split()
+                names = fh.readline().replace(",", " ").replace(";", " ").split()
             if set(_XYZ) <= set(names):
                 table = np.loadtxt(path, delimiter=delimiter, skiprows=1, ndmin=2)
                 if table.shape[1] == len(names):

@@ -318,16 +318,27 @@ class TextPart:
                     where = (f"line {line + 1} (point {start + i}): "
                              f"{text.strip()[:80]!r} ({why})" if i is not None
                              else f"the block of points from {start} ({exc})")
+                    comma = (" (decimal commas are not read: export with a decimal point)"
+                             if text is not None and "," in text and ";" in text else "")
                     raise FileFormatError(f"{path}: unreadable point line at {where}; "
-                                          "each line needs three numbers x y z; fix or remove "
-                                          "it.") from None
+                                          f"each line needs three numbers x y z{comma}; fix or "
+                                          "remove it.") from None
                 if len(got) != m:  # a line numpy skips that _is_point_line does not
                     raise FileFormatError(f"{path}: {m - len(got)} of the lines {first + 1} to "
                                           f"{first + span} hold no point; remove them.")
                 xyz = np.ascontiguousarray(got[:, :3])
                 attrs = {las: colour_uint16(got[:, 3 + j], code)
                          for j, (las, (_, code)) in enumerate(zip(PLY_COLOURS, self.colour or ()))}
-                yield start, check_finite(xyz, start, [path]), attrs
+                bad = np.flatnonzero(~np.isfinite(xyz).all(axis=1))
+                if bad.size:  # "nan" and "inf" parse: name the line, as for a bad one
+                    i = int(bad[0])
+                    line = first + i if numbers is None else numbers[i]
+                    raise InputError(f"{path}: line {line + 1} (point {start + i}) has a NaN or "
+                                     f"infinite coordinate: {lines[i].strip()[:80]!r}"
+                                     + (f" ({bad.size} such lines in lines {first + 1} to "
+                                        f"{first + span})" if bad.size > 1 else "")
+                                     + "; drop or fix those lines and run again.")
+                yield start, xyz, attrs
                 start += m
 
 
@@ -410,12 +421,14 @@ def _first_bad_line(lines, delimiter):
 
 def _text_header(path):
     """(lines to skip, delimiter) of an XYZ/CSV/TXT file, from its first line: a header if it
-    does not start with three numbers, commas if it has any."""
+    does not start with three numbers; commas if it has any, else semicolons if it has any
+    (CloudCompare's and spreadsheets' other CSV; the in-memory reader's rule, ``io.mesh``),
+    else whitespace."""
     with open(path, "rb") as fh:
         first = fh.readline()
     line = first.decode("ascii", errors="replace")
-    delimiter = "," if "," in line else None
-    tokens = line.replace(",", " ").split()
+    delimiter = "," if "," in line else ";" if ";" in line else None
+    tokens = line.replace(",", " ").replace(";", " ").split()
     try:
         [float(t) for t in tokens[:3]]
         header = len(tokens) < 3
