@@ -340,6 +340,13 @@ def test_max_spacing_holds_across_tiles(bunny, tmp_path):
     assert alone.reached and alone.target == alone.n_output == len(K) and not alone.message
     assert abs(alone.n_output - s.n_output) < 0.05 * s.n_output
     assert cKDTree(K).query(X)[0].max() <= limit
+    # a count it reaches is refined, as without a guard, and the bound holds (the tiles'
+    # refinement never raises the cut's Hausdorff distance)
+    r = run(path, tmp_path / "r.npy", ratio=0.2, tile_points=2500, workers=2, progress=False,
+            options=SimplifyOptions(guard="max_spacing", max_spacing=limit))
+    out = np.load(tmp_path / "r.npy")
+    assert r.reached and r.refined and len(out) == r.target
+    assert cKDTree(np.c_[out["x"], out["y"], out["z"]]).query(X)[0].max() <= limit
 
 
 def test_a_short_run_says_why_as_the_core_does(bunny, tmp_path):

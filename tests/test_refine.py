@@ -210,13 +210,20 @@ def test_simplify_points_refined_result_is_consistent():
     assert np.array_equal(res.keep_at(count=400), greedy.keep)
 
 
-def test_paper_mode_and_guard_are_not_refined():
+def test_paper_mode_is_not_refined_and_a_guarded_run_is_within_its_bound():
+    """Mode "paper" is not refined. A ``max_spacing`` run that reaches its count is: the
+    refinement never raises the Hausdorff distance, so the bound holds, and lower."""
+    from scipy.spatial import cKDTree
     X = _wavy(2000)
     res = simplify_points(X, ratio=0.2, options=SimplifyOptions(mode="paper"))
     assert "refine_swaps" not in res.stats
+    limit = 4.0 * float(np.median(cKDTree(X).query(X, 2)[0][:, 1]))  # binds: the greedy 4.35
     res = simplify_points(X, ratio=0.2, options=SimplifyOptions(guard="max_spacing",
-                                                               max_spacing=1.0))
-    assert "refine_swaps" not in res.stats
+                                                               max_spacing=limit))
+    assert res.reached and res.stats["refine_swaps"] > 0
+    refined = cKDTree(X[res.keep]).query(X)[0].max()
+    greedy = cKDTree(X[res.keep_at(count=res.count)]).query(X)[0].max()  # the greedy's set
+    assert refined < greedy <= limit
 
 
 def test_refine_option_validated():

@@ -250,18 +250,19 @@ def test_max_spacing_leaves_no_point_farther_than_the_limit(kind, data_dir):
         assert _farthest(X, free.keep) > limit, factor
 
 
-def test_a_guard_that_never_vetoes_removes_as_the_greedy_does():
-    """A limit no gap reaches: the same sequence as the greedy without a guard (the guard
-    turns off the refinement, so it is off there too), with and without the pre-thinning
-    (its disks capped at half the limit: no cap here), until the last few points, which no
-    remaining point can cover."""
+def test_a_guard_that_never_vetoes_changes_nothing():
+    """A limit no gap reaches: the default's output exactly (its pre-thinning's disks are
+    capped at half the limit: no cap here; the refinement runs as without a guard), with the
+    same removal sequence until the last few points, which no remaining point can cover;
+    without the pre-thinning too."""
     from tiledsimplify import SimplifyOptions, simplify_points
     X = _cloud("wavy", 1500)
     for prethin in (0, None):
         guarded = simplify_points(X, 0.1, options=SimplifyOptions(
             guard="max_spacing", max_spacing=1e6, prethin=prethin))
-        free = simplify_points(X, 0.1, options=SimplifyOptions(prethin=prethin, refine=False))
+        free = simplify_points(X, 0.1, options=SimplifyOptions(prethin=prethin))
         assert ("n_prethin_subset" in guarded.stats) == (prethin is None)
         assert guarded.reached and len(free.order) - 10 < len(guarded.order) < len(free.order)
         np.testing.assert_array_equal(guarded.order[:1400], free.order[:1400])
         np.testing.assert_array_equal(guarded.keep, free.keep)
+        assert guarded.stats["refine_swaps"] == free.stats["refine_swaps"] > 0

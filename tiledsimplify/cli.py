@@ -51,7 +51,7 @@ EDGE_ANGLE_HELP = ("mode coverage: the least fold of a sharp edge in degrees, ab
 MAX_SPACING_HELP = ("leave no input point farther than DISTANCE (model units) from a kept "
                     "point: removals that would are vetoed, so more than the count may be kept "
                     "(exit 3); alone (no --ratio or --count), keep as few points as that "
-                    "allows. Turns off the gap refinement")
+                    "allows")
 #: the command's words for the budget message's options.boundary_threshold (core/result.py)
 BUDGET_HINT = "on the command line, %s sets options.boundary_threshold%s"
 #: ... and options.max_spacing, where the run had a guard

@@ -126,8 +126,9 @@ class SimplifyOptions:
         measure is above ``refine.PROTECT`` (3) times the threshold are never swapped out.
         Only the kept set at the requested count is refined: ``order`` and
         :meth:`SimplifyResult.keep_at` stay the greedy's. None: the mode's default
-        (``"coverage"``: True; ``"paper"``: False). Not applied with a guard, whose veto the
-        swaps would not respect.
+        (``"coverage"``: True; ``"paper"``: False). With a ``max_spacing`` guard as well (it
+        never raises the Hausdorff distance, so the bound holds; until 2026-12-04 it was off
+        with a guard, so a limit that never bound still cost the refined quality).
     update_normals : bool or None
         After each removal, recompute the normals of the removed point's former neighbours
         from their new local meshes, and so the importance of every point whose Eq. (1) reads
@@ -250,9 +251,10 @@ class SimplifyOptions:
 
     @property
     def refines(self):
-        """Whether the gap refinement applies: ``refine`` on and no guard (whose veto the
-        swaps would not respect)."""
-        return self.refine and self.guard == "none"
+        """Whether the gap refinement applies: ``refine`` on. With a ``max_spacing`` guard too:
+        its swaps never raise the Hausdorff distance (:mod:`.refine`; tiled,
+        :mod:`tiledsimplify.pipeline.tile_refine`), so the guard's bound holds."""
+        return self.refine
 
     @classmethod
     def from_mapping(cls, mapping):
