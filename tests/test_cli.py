@@ -517,6 +517,23 @@ def test_max_spacing_reaches_both_commands(cloud, tmp_path, caplog, capsys):
         assert "or --max-spacing DISTANCE alone" in caplog.text
 
 
+def test_a_config_max_spacing_without_its_guard_says_so(cloud, tmp_path, caplog):
+    """A config with ``max_spacing`` but no ``guard = "max_spacing"`` (one of the presets'
+    two commented lines switched on) ran without the bound, or, with no ratio, was told to
+    give --ratio; it is refused naming the file and the missing line."""
+    X, path = cloud
+    for run_table in ("", "[run]\nratio = 0.1\n"):
+        cfg = tmp_path / "c.toml"
+        cfg.write_text(run_table + "[simplify]\nmax_spacing = 0.25\n")
+        caplog.clear()
+        with caplog.at_level("ERROR", logger="tiledsimplify"):
+            assert main(["run", str(path), str(tmp_path / "o.npy"), "--config", str(cfg),
+                         "-q"]) == EXIT_INPUT
+        assert (f"{cfg}: [simplify] options.max_spacing=0.25 is a bound only with "
+                "options.guard='max_spacing'") in caplog.text
+        assert not (tmp_path / "o.npy").exists()
+
+
 @pytest.mark.parametrize("command, said, not_said", [
     ("report", "6 x dpi pixels on its longer side", "square"),  # panels follow the view
     ("simplify", "0.08 rad on the two-ring measure in coverage", "(default: automatic)"),

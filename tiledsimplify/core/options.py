@@ -99,7 +99,7 @@ class SimplifyOptions:
         A rule that can veto a removal (see :mod:`tiledsimplify.core.removal`). Vetoed
         points are kept; if that makes the target unreachable the result says so.
     max_spacing : float or None
-        For ``guard="max_spacing"``: no input point is left farther than this distance (model
+        For ``guard="max_spacing"`` (and refused without it): no input point is left farther than this distance (model
         units) from a kept point, at every count of the removal sequence. Each removed point
         is covered by a remaining one within the distance; a removal is vetoed unless the
         point and every point it covers can be handed to a remaining Voronoi neighbour within
@@ -208,6 +208,11 @@ class SimplifyOptions:
                 self.max_spacing is not None and self.max_spacing > 0):
             raise InputError("options.guard='max_spacing' needs options.max_spacing, a positive "
                              f"distance in model units; got {self.max_spacing!r}.")
+        if self.guard != "max_spacing" and self.max_spacing is not None:  # was ignored
+            raise InputError(f"options.max_spacing={self.max_spacing!r} is a bound only with "
+                             "options.guard='max_spacing' (guard = \"max_spacing\" in a "
+                             f"config's [simplify]), not with guard={self.guard!r}; set it, or "
+                             "drop max_spacing.")
         for name in ("edge_width", "coverage"):
             if not getattr(self, name) > 0:
                 raise InputError(f"options.{name} must be positive, got {getattr(self, name)!r}.")
