@@ -242,6 +242,13 @@ def test_run_writes_a_json_summary_for_pipelines(cloud, tmp_path):
     missing = tmp_path / "no_such_dir" / "run.json"
     assert main(["run", str(path), str(out), "--ratio", "0.25", "--summary", str(missing),
                  "-q"]) == EXIT_INPUT
+    # the bound a --max-spacing run meets: with it alone the target is the count reached,
+    # which the summary did not tell from a count asked for
+    assert got["max_spacing"] is None
+    assert main(["run", str(path), str(out), "--max-spacing", "0.25", "--summary",
+                 str(summary), "-q"]) == EXIT_OK
+    got = json.loads(summary.read_text())
+    assert got["max_spacing"] == 0.25 and got["target"] == got["n_output"] == len(np.load(out))
 
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs Linux /proc")

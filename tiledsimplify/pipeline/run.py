@@ -86,7 +86,9 @@ class RunSummary:
     ``workers``: the local workers (threads or processes) the run used, None on a cluster.
     ``peak_rss_mb``: this process's peak resident memory so far (on local threads the run's
     own, whose size follows the tiles'; not that of worker processes), NaN where the system
-    does not say.
+    does not say. ``max_spacing``: the bound a ``max_spacing`` guard kept (no input point
+    farther from a kept one; None without a guard) — with no count asked, ``target`` is the
+    count it reached.
     """
 
     n_input: int
@@ -106,6 +108,7 @@ class RunSummary:
     cpu_seconds: dict = field(default_factory=dict)
     peak_rss_mb: float = float("nan")
     workers: int | None = None
+    max_spacing: float | None = None
 
     def to_dict(self):
         return asdict(self)
@@ -1023,7 +1026,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          store="" if store is None else str(store_path), output=str(output),
                          reached=reached, message=message, refined=refined, seconds=seconds,
                          cpu_seconds=cpu_seconds, peak_rss_mb=_peak_rss_mb(),
-                         workers=None if client is not None else workers)
+                         workers=None if client is not None else workers,
+                         max_spacing=(float(options.max_spacing)
+                                      if options.guard == "max_spacing" else None))
     log.info("kept %d of %d points (%d boundary) from %d tiles (%d run deeper) in %.1f s "
              "(%.0f input points/s): %s", n_out, n, n_boundary, ts.n_tiles, n_deeper,
              seconds["total"], n / seconds["total"] if seconds["total"] else 0.0,
