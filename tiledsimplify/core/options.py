@@ -205,9 +205,9 @@ class SimplifyOptions:
         if self.guard not in GUARDS:
             raise InputError(f"options.guard must be one of {tuple(GUARDS)}, got {self.guard!r}.")
         if self.guard == "max_spacing" and not (
-                self.max_spacing is not None and self.max_spacing > 0):
+                self.max_spacing is not None and 0 < self.max_spacing < float("inf")):
             raise InputError("options.guard='max_spacing' needs options.max_spacing, a positive "
-                             f"distance in model units; got {self.max_spacing!r}.")
+                             f"(finite) distance in model units; got {self.max_spacing!r}.")
         if self.guard != "max_spacing" and self.max_spacing is not None:  # was ignored
             raise InputError(f"options.max_spacing={self.max_spacing!r} is a bound only with "
                              "options.guard='max_spacing' (guard = \"max_spacing\" in a "
