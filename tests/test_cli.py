@@ -528,7 +528,7 @@ def test_a_config_max_spacing_without_its_guard_says_so(cloud, tmp_path, caplog)
     """A config with ``max_spacing`` but no ``guard = "max_spacing"`` (one of the presets'
     two commented lines switched on) ran without the bound, or, with no ratio, was told to
     give --ratio; it is refused naming the file and the missing line."""
-    X, path = cloud
+    _, path = cloud
     for run_table in ("", "[run]\nratio = 0.1\n"):
         cfg = tmp_path / "c.toml"
         cfg.write_text(run_table + "[simplify]\nmax_spacing = 0.25\n")
