@@ -242,6 +242,13 @@ def test_run_writes_a_json_summary_for_pipelines(cloud, tmp_path):
     missing = tmp_path / "no_such_dir" / "run.json"
     assert main(["run", str(path), str(out), "--ratio", "0.25", "--summary", str(missing),
                  "-q"]) == EXIT_INPUT
+    # the bound a --max-spacing run meets: with it alone the target is the count reached,
+    # which the summary did not tell from a count asked for
+    assert got["max_spacing"] is None
+    assert main(["run", str(path), str(out), "--max-spacing", "0.25", "--summary",
+                 str(summary), "-q"]) == EXIT_OK
+    got = json.loads(summary.read_text())
+    assert got["max_spacing"] == 0.25 and got["target"] == got["n_output"] == len(np.load(out))
 
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs Linux /proc")
@@ -515,6 +522,23 @@ def test_max_spacing_reaches_both_commands(cloud, tmp_path, caplog, capsys):
         caplog.clear()
         assert main([command, str(path), str(alone), "-q"]) == EXIT_INPUT
         assert "or --max-spacing DISTANCE alone" in caplog.text
+
+
+def test_a_config_max_spacing_without_its_guard_says_so(cloud, tmp_path, caplog):
+    """A config with ``max_spacing`` but no ``guard = "max_spacing"`` (one of the presets'
+    two commented lines switched on) ran without the bound, or, with no ratio, was told to
+    give --ratio; it is refused naming the file and the missing line."""
+    _, path = cloud
+    for run_table in ("", "[run]\nratio = 0.1\n"):
+        cfg = tmp_path / "c.toml"
+        cfg.write_text(run_table + "[simplify]\nmax_spacing = 0.25\n")
+        caplog.clear()
+        with caplog.at_level("ERROR", logger="tiledsimplify"):
+            assert main(["run", str(path), str(tmp_path / "o.npy"), "--config", str(cfg),
+                         "-q"]) == EXIT_INPUT
+        assert (f"{cfg}: [simplify] options.max_spacing=0.25 is a bound only with "
+                "options.guard='max_spacing'") in caplog.text
+        assert not (tmp_path / "o.npy").exists()
 
 
 @pytest.mark.parametrize("command, said, not_said", [

@@ -349,6 +349,37 @@ def test_max_spacing_holds_across_tiles(bunny, tmp_path):
     assert cKDTree(np.c_[out["x"], out["y"], out["z"]]).query(X)[0].max() <= limit
 
 
+def test_max_spacing_holds_after_a_las_outputs_quantisation(bunny, tmp_path):
+    """A LAS/LAZ output of a non-LAS input puts the kept points on a grid (a thousandth of the
+    spacing): a kept point moves by up to half a step on each axis. The tiles' guard works to
+    the limit less that move, so the file read back still leaves no input point farther than
+    the limit: the Bunny at 2 spacings had 2 points 2.4e-7 beyond it (the step 1e-6). A
+    store is resumed only for an output that moves points as its tiles assumed."""
+    from scipy.spatial import cKDTree
+
+    from tiledsimplify import SimplifyOptions
+    from tiledsimplify.synthetic import spacing
+    X, path = bunny
+    limit = 2 * spacing(X)
+    out = tmp_path / "o.las"
+    s = run(path, out, tile_points=3000, workers=1, progress=False,
+            options=SimplifyOptions(guard="max_spacing", max_spacing=limit))
+    las = laspy.read(out)
+    assert s.reached and len(las.points) == s.n_output and las.header.scales[0] == 1e-6
+    assert cKDTree(np.c_[las.x, las.y, las.z]).query(X)[0].max() <= limit
+    # a store made for a .npy output (the limit as given) is not resumed for a LAS one
+    run(path, tmp_path / "o.npy", tile_points=3000, workers=1, store=tmp_path / "st",
+        options=SimplifyOptions(guard="max_spacing", max_spacing=limit))
+    with pytest.raises(InputError, match="max_spacing_less: the LAS output grid's move here, "
+                                         "none in the store"):
+        run(path, out, tile_points=3000, workers=1, store=tmp_path / "st",
+            options=SimplifyOptions(guard="max_spacing", max_spacing=limit))
+    # a limit the grid's step could break on its own is refused, naming the way out
+    with pytest.raises(InputError, match=r"--max-spacing 5e-07 .* \.ply, \.npy"):
+        run(path, tmp_path / "p.las", options=SimplifyOptions(guard="max_spacing",
+                                                              max_spacing=5e-7))
+
+
 def test_a_short_run_says_why_as_the_core_does(bunny, tmp_path):
     """A run that cannot reach its count says what it had to keep: boundary points, and
     points the max_spacing guard vetoed — it blamed boundary points alone, even where there

@@ -266,3 +266,28 @@ def test_a_guard_that_never_vetoes_changes_nothing():
         np.testing.assert_array_equal(guarded.order[:1400], free.order[:1400])
         np.testing.assert_array_equal(guarded.keep, free.keep)
         assert guarded.stats["refine_swaps"] == free.stats["refine_swaps"] > 0
+
+
+@pytest.mark.parametrize("limit", [1e200, 1e300])
+def test_a_limit_whose_square_overflows_still_keeps_a_cover(limit):
+    """A limit past ~1.3e154 squares to inf: the guard compared a removed point's distance to
+    no cover (inf) with it, found inf > inf false and let the last points go — 0 kept of 2000,
+    every point infinitely far from a kept one — and handed the point to cover -1 (the cover
+    lists' last slot). A point with no cover is kept whatever the limit."""
+    from tiledsimplify import SimplifyOptions, simplify_points
+    X = _cloud("wavy", 1500)
+    for prethin in (0, None):
+        res = simplify_points(X, options=SimplifyOptions(guard="max_spacing", max_spacing=limit,
+                                                         prethin=prethin))
+        assert 1 <= res.count <= 10 and _farthest(X, res.keep) <= limit
+
+
+def test_a_limit_that_is_not_a_finite_distance_is_refused():
+    """``max_spacing = inf`` (valid TOML) bounded nothing; the command line refused it."""
+    import math
+
+    from tiledsimplify import SimplifyOptions
+    from tiledsimplify.errors import InputError
+    for bad in (math.inf, math.nan, 0.0, -1.0):
+        with pytest.raises(InputError, match=r"positive \(finite\) distance in model units"):
+            SimplifyOptions(guard="max_spacing", max_spacing=bad)

@@ -370,20 +370,20 @@ def _run(args):
     if "ratio" in run_cfg and "count" in run_cfg and (args.ratio is not None
                                                       or args.count is not None):
         run_cfg.pop("count" if args.ratio is not None else "ratio")
-    if ("ratio" not in run_cfg and "count" not in run_cfg and args.max_spacing is None
-            and simplify_cfg.get("guard") != "max_spacing"):  # the API says "ratio= or count="
-        raise InputError("give --ratio R (a fraction of the points, in (0, 1]) or --count N, "
-                         "or ratio / count in the [run] table of --config; or --max-spacing "
-                         "DISTANCE alone to keep as few points as that allows.")
     if args.mode is not None:
         simplify_cfg = {**simplify_cfg, "mode": args.mode}
     simplify_cfg = {**simplify_cfg, **_option_flags(args)}
-    try:
+    try:  # before the count: a config's max_spacing without its guard is named as such
         options = SimplifyOptions.from_mapping(simplify_cfg)
     except InputError as exc:
         if not args.config:
             raise
         raise InputError(f"{args.config}: [simplify] {exc}") from None
+    if ("ratio" not in run_cfg and "count" not in run_cfg
+            and options.guard != "max_spacing"):  # the API says "ratio= or count="
+        raise InputError("give --ratio R (a fraction of the points, in (0, 1]) or --count N, "
+                         "or ratio / count in the [run] table of --config; or --max-spacing "
+                         "DISTANCE alone to keep as few points as that allows.")
     if args.summary:
         check_writable(args.summary)
     summary = run(args.input, args.output, ratio=run_cfg.get("ratio"),

@@ -99,15 +99,15 @@ class SimplifyOptions:
         A rule that can veto a removal (see :mod:`tiledsimplify.core.removal`). Vetoed
         points are kept; if that makes the target unreachable the result says so.
     max_spacing : float or None
-        For ``guard="max_spacing"``: no input point is left farther than this distance (model
-        units) from a kept point, at every count of the removal sequence. Each removed point
-        is covered by a remaining one within the distance; a removal is vetoed unless the
-        point and every point it covers can be handed to a remaining Voronoi neighbour within
-        it (:func:`tiledsimplify.core.removal.guard_allows`). In a tiled run a tile's points
-        are covered by its own points only (its halo's own tiles may remove them). Until
-        2026-12-04 the rule only asked for a remaining neighbour of the removed point within
-        the distance, which bounded nothing: the Bunny at 5 spacings had points 7 spacings
-        from every kept one, 8.8 in a tiled run.
+        For ``guard="max_spacing"`` (and refused without it): no input point is left farther
+        than this distance (model units) from a kept point, at every count of the removal
+        sequence. Each removed point is covered by a remaining one within the distance; a
+        removal is vetoed unless the point and every point it covers can be handed to a
+        remaining Voronoi neighbour within it (:func:`tiledsimplify.core.removal.guard_allows`).
+        In a tiled run a tile's points are covered by its own points only (its halo's own tiles
+        may remove them). Until 2026-12-04 the rule only asked for a remaining neighbour of the
+        removed point within the distance, which bounded nothing: the Bunny at 5 spacings had
+        points 7 spacings from every kept one, 8.8 in a tiled run.
     progressive : bool
         Keep removing past the target (recording rank and importance) until only boundary and
         frozen points remain, so :meth:`SimplifyResult.keep_at` can answer any coarser count.
@@ -206,9 +206,14 @@ class SimplifyOptions:
         if self.guard not in GUARDS:
             raise InputError(f"options.guard must be one of {tuple(GUARDS)}, got {self.guard!r}.")
         if self.guard == "max_spacing" and not (
-                self.max_spacing is not None and self.max_spacing > 0):
+                self.max_spacing is not None and 0 < self.max_spacing < float("inf")):
             raise InputError("options.guard='max_spacing' needs options.max_spacing, a positive "
-                             f"distance in model units; got {self.max_spacing!r}.")
+                             f"(finite) distance in model units; got {self.max_spacing!r}.")
+        if self.guard != "max_spacing" and self.max_spacing is not None:  # was ignored
+            raise InputError(f"options.max_spacing={self.max_spacing!r} is a bound only with "
+                             "options.guard='max_spacing' (guard = \"max_spacing\" in a "
+                             f"config's [simplify]), not with guard={self.guard!r}; set it, or "
+                             "drop max_spacing.")
         for name in ("edge_width", "coverage"):
             if not getattr(self, name) > 0:
                 raise InputError(f"options.{name} must be positive, got {getattr(self, name)!r}.")

@@ -74,15 +74,15 @@ def guard_allows(guard, value, X, p, start, cnt, pool, covers, owners):
     """
     if guard == 0:
         return True
-    limit = value * value
+    limit = value * value  # inf past ~1.3e154: a point with no cover at all still stays
     if covers[p]:
-        _, d = _nearest_cover(X, p, p, start, cnt, pool, covers)
-        if d > limit:
+        q, d = _nearest_cover(X, p, p, start, cnt, pool, covers)
+        if q < 0 or d > limit:
             return False
     x = owners[0, p]
     while x >= 0:
-        _, d = _nearest_cover(X, x, p, start, cnt, pool, covers)
-        if d > limit:
+        q, d = _nearest_cover(X, x, p, start, cnt, pool, covers)
+        if q < 0 or d > limit:
             return False
         x = owners[1, x]
     return True

@@ -418,8 +418,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
                                  if aim > 0 or not guarded else None,
                                  spacing if spacing is not None else median_spacing(Xu), tie,
                                  least=aim, first=fixed_u & ~never_u, max_radius=cap)
-        if sub is not None and guarded:
-            owner_u = prethin_mod.covered_by(Xu, sub, covers_u, options.max_spacing)
+        if sub is not None and guarded:  # in the input's coordinates, as the guard measures
+            owner_u = prethin_mod.covered_by(X[rep], sub, covers_u, options.max_spacing)
     if sub is not None:
         thinned = np.flatnonzero(~sub)
         thinned = thinned[np.argsort(tie[thinned], kind="stable")]
@@ -435,14 +435,20 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         Xg, boundary_g, tie_g, alive = Xu, boundary_u, tie, ~never_u
     lap("prethin")
     # the max_spacing guard's cover lists (removal.guard_allows; empty, unread, without it):
-    # the subset's points, then the thinned ones, each already handed to its nearest cover
+    # the subset's points, then the thinned ones, each already handed to its nearest cover.
+    # Their distances are measured in the input's coordinates, not the centred ones the
+    # other steps run on: ``x - c`` rounds, and a cover at the limit there (a grid's
+    # neighbour at one spacing) was up to an ulp beyond it where a user checks the bound
     m_guard = Xg.shape[0] if guarded else 0
     covers_g = (np.ones(m_guard, dtype=bool) if covers_u is None or not m_guard
                 else covers_u if sub is None else covers_u[keep_ids])
     owners = np.full((2, m_guard + (thinned.size if guarded else 0)), -1, dtype=np.int64)
     cover_xyz = Xg[:m_guard]
+    if guarded:
+        P = X[rep]
+        cover_xyz = np.ascontiguousarray(P if sub is None else np.concatenate(
+            [P[keep_ids], P[thinned]]))
     if guarded and thinned.size:
-        cover_xyz = np.concatenate([Xg, Xu[thinned]])
         slot = np.full(m, -1, dtype=np.int64)  # a point's index among the subset's
         slot[keep_ids] = np.arange(keep_ids.size)
         cover_of = owner_u[thinned]

@@ -86,7 +86,9 @@ class RunSummary:
     ``workers``: the local workers (threads or processes) the run used, None on a cluster.
     ``peak_rss_mb``: this process's peak resident memory so far (on local threads the run's
     own, whose size follows the tiles'; not that of worker processes), NaN where the system
-    does not say.
+    does not say. ``max_spacing``: the bound a ``max_spacing`` guard kept (no input point
+    farther from a kept one; None without a guard) — with no count asked, ``target`` is the
+    count it reached.
     """
 
     n_input: int
@@ -106,6 +108,7 @@ class RunSummary:
     cpu_seconds: dict = field(default_factory=dict)
     peak_rss_mb: float = float("nan")
     workers: int | None = None
+    max_spacing: float | None = None
 
     def to_dict(self):
         return asdict(self)
@@ -844,6 +847,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         settings["prethin"] = {"factor": options.prethin_factor, "scheme": prethin.SCHEME}
         if options.guard == "max_spacing":  # the disks are a share of the limit
             settings["prethin"]["guard_radius"] = prethin.GUARD_RADIUS
+    if options.guard == "max_spacing" and regrids(output, source):  # the tiles' limit is
+        settings["max_spacing_less"] = "the LAS output grid's move"  # less it (guard_limit)
     fp = _fingerprint(source, settings)
 
     held = contextlib.ExitStack()  # closed at the end: the lock, the temporary store, a client
@@ -920,6 +925,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             spacing = ts.spacing
         if spacing is not None:
             opts = {**opts, "spacing": spacing}
+        if options.guard == "max_spacing":  # less what a LAS output's grid moves a point
+            opts = {**opts, "max_spacing": guard_limit(options.max_spacing, output, source, ts)}
 
         # mode "paper": neighbourhoods of every tile (saved for the tile pass), one threshold
         # for all tiles (mode "coverage" flags edges by a fixed candidate angle and a local
@@ -1019,7 +1026,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          store="" if store is None else str(store_path), output=str(output),
                          reached=reached, message=message, refined=refined, seconds=seconds,
                          cpu_seconds=cpu_seconds, peak_rss_mb=_peak_rss_mb(),
-                         workers=None if client is not None else workers)
+                         workers=None if client is not None else workers,
+                         max_spacing=(float(options.max_spacing)
+                                      if options.guard == "max_spacing" else None))
     log.info("kept %d of %d points (%d boundary) from %d tiles (%d run deeper) in %.1f s "
              "(%.0f input points/s): %s", n_out, n, n_boundary, ts.n_tiles, n_deeper,
              seconds["total"], n / seconds["total"] if seconds["total"] else 0.0,
@@ -1137,6 +1146,46 @@ def _check_grid(output, source, ts):
         lo, hi = ts.root_attrs["bounds"]
         if not fits_grid(lo, hi, source.scales, source.offsets):  # the template's
             raise off_grid(output, lo, hi, source.scales, source.offsets)
+
+
+def regrids(output, source):
+    """Whether the output puts the kept points on a grid they were not read from: a LAS/LAZ
+    output of a non-LAS input, or of LAS files on other scales or offsets than the first's
+    (whose grid the output takes); a LAS input's records are otherwise kept as read."""
+    if output.suffix.lower() not in LAS_SUFFIXES:
+        return False
+    return not source.is_las or not all(
+        np.array_equal(i.scales, source.scales) and np.array_equal(i.offsets, source.offsets)
+        for i in source.infos)
+
+
+def guard_limit(limit, output, source, ts):
+    """The distance the tiles' ``max_spacing`` guard works to: ``limit``, less the most a
+    LAS/LAZ output's quantisation moves a kept point where it puts points on a grid they
+    were not read from — a non-LAS input (:func:`.las.new_header`: a thousandth of the
+    spacing) or LAS files on other scales or offsets than the first's, whose grid the output
+    takes. Half a step on each axis, and the rounding of ``X * scale + offset`` read back:
+    the points of the file then still lie within ``limit`` of every input point (on the
+    Bunny at 2 spacings, 2 points were 2.4e-7 beyond it, the step 1e-6). A limit that
+    move alone could break is refused."""
+    if not regrids(output, source):
+        return limit
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in ts.root_attrs["bounds"])
+    if source.is_las:
+        scales = source.scales
+    else:
+        from ..io.las import new_header
+        scales = np.asarray(new_header(lo, hi, ts.spacing).scales, dtype=np.float64)
+    move = float(0.5 * np.linalg.norm(scales)
+                 + 4 * np.linalg.norm(np.spacing(np.maximum(np.abs(lo), np.abs(hi)))))
+    if not limit > move:
+        raise InputError(
+            f"{output}: --max-spacing {limit:g} (options.max_spacing) is within what the LAS "
+            f"output's grid (scales {scales.tolist()}) moves a kept point ({move:.3g}); write "
+            ".ply, .npy, .xyz or .csv (coordinates as read), or give a larger distance.")
+    log.info("the max_spacing guard works to %.9g: the LAS output's grid moves a kept point "
+             "by up to %.3g", limit - move, move)
+    return limit - move
 
 
 def _check_room(output, output_bytes, store, n):
