@@ -383,7 +383,8 @@ def test_max_spacing_holds_after_a_las_outputs_quantisation(bunny, tmp_path):
 def test_a_short_run_says_why_as_the_core_does(bunny, tmp_path):
     """A run that cannot reach its count says what it had to keep: boundary points, and
     points the max_spacing guard vetoed — it blamed boundary points alone, even where there
-    were none (a plate under the guard: 1,204 kept for 300, 0 boundary)."""
+    were none (a plate under the guard: 1,204 kept for 300, 0 boundary); the advice names
+    what kept the most first, and nothing for a cause that kept none."""
     from tiledsimplify import SimplifyOptions
     rng = np.random.default_rng(7)
     plate = np.c_[rng.random((30000, 2)) * 30, np.zeros(30000)]
@@ -393,8 +394,7 @@ def test_a_short_run_says_why_as_the_core_does(bunny, tmp_path):
     assert not s.reached and s.n_tiles >= 4 and s.n_boundary == 0
     assert s.message == (f"asked to keep 300 of 30000 points, but {s.n_output} must be kept (0 "
                          f"boundary; {s.n_output} vetoed by the max_spacing guard): kept "
-                         f"{s.n_output}. Raise the target, or raise options.boundary_threshold "
-                         "to flag fewer boundary points, or raise options.max_spacing.")
+                         f"{s.n_output}. Raise the target, or raise options.max_spacing.")
     X, path = bunny
     s = run(path, tmp_path / "b.npy", count=10, tile_points=3000)
     assert not s.reached and s.n_output == s.n_boundary > 10

@@ -88,9 +88,13 @@ def short_message(target, n, must, kept, boundary, vetoed, guard, frozen=None):
         why += f", {frozen} frozen, overlapping ones counted once"
     if vetoed:
         why += f"; {vetoed} vetoed by the {guard} guard"
+    # the advice for what kept the most first; none for a cause that kept nothing
+    fixes = [(vetoed, "raise options.max_spacing"),
+             (boundary or not vetoed, "raise options.boundary_threshold to flag fewer boundary "
+                                      "points")]
+    fixes = [fix for count, fix in sorted(fixes, key=lambda f: -f[0]) if count]
     return (f"asked to keep {target} of {n} points, but {must} must be kept ({why}): kept "
-            f"{kept}. Raise the target, or raise options.boundary_threshold to flag fewer "
-            "boundary points" + (", or raise options.max_spacing" if vetoed else "") + ".")
+            f"{kept}. Raise the target, or " + ", or ".join(fixes) + ".")
 
 
 def resolve_target(n, ratio, count):
