@@ -89,9 +89,8 @@ def short_message(target, n, must, kept, boundary, vetoed, guard, frozen=None):
     if vetoed:
         why += f"; {vetoed} vetoed by the {guard} guard"
     # the advice for what kept the most first; none for a cause that kept nothing
-    fixes = [(vetoed, "raise options.max_spacing"),
-             (boundary or not vetoed, "raise options.boundary_threshold to flag fewer boundary "
-                                      "points")]
+    flags = "raise options.boundary_threshold to flag fewer boundary points"
+    fixes = [(vetoed, "raise options.max_spacing"), (boundary or not vetoed, flags)]
     fixes = [fix for count, fix in sorted(fixes, key=lambda f: -f[0]) if count]
     return (f"asked to keep {target} of {n} points, but {must} must be kept ({why}): kept "
             f"{kept}. Raise the target, or " + ", or ".join(fixes) + ".")
