@@ -88,12 +88,17 @@ def _stop_behind(exc):
     return None
 
 
+def _number(text):
+    """``text`` as a float, NaN if it is none (the parser types below then refuse it)."""
+    try:
+        return float(text)
+    except ValueError:
+        return math.nan
+
+
 def _ratio(text):
     """A fraction of the points to keep, in (0, 1] (the API's own message names ``ratio=``)."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
+    value = _number(text)
     if not 0 < value <= 1:
         raise argparse.ArgumentTypeError(f"expected a fraction of the points in (0, 1], got "
                                          f"{text!r}; give --count N for a number of points")
@@ -102,10 +107,7 @@ def _ratio(text):
 
 def _distance(text):
     """A positive, finite length in model units."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
+    value = _number(text)
     if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"expected a positive distance in the input's units, "
                                          f"got {text!r}")
@@ -118,10 +120,7 @@ def _count(text):
         return int(text)  # int() and float() read "2_000_000" themselves
     except ValueError:
         pass
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
+    value = _number(text)
     if not (math.isfinite(value) and value.is_integer()):
         raise argparse.ArgumentTypeError(f"expected a whole number (2000000, 2_000_000 or 2e6), "
                                          f"got {text!r}")

@@ -41,7 +41,7 @@ from ._jit import jit
 #: 300k-point scan of ``benchmarks/core_speed.py`` at limits of 3 / 5 spacings): 0.35 — 7.41 /
 #: 4.97 s, mean surface error 0.758 / 1.013 (1e-4 of the diagonal; at 3 spacings the subset
 #: would be above ``MAX_SHARE``: not thinned); 0.5 — 5.05 / 4.52 s, 0.768 / 1.018; 0.7 — 4.20
-#: / 4.28 s, 0.775 / 1.037; counts within 0.4 %; on the Bunny mean error within ±1 % either way
+#: / 4.28 s, 0.775 / 1.037; counts within 0.7 %; on the Bunny mean error within ±1 % either way
 GUARD_RADIUS = 0.5
 #: the largest subset, as a share of the cloud, worth thinning to: the subset's own
 #: neighbourhoods cost ~10 µs a point and the sample ~2 µs a point of the cloud, against ~20 µs

@@ -96,14 +96,19 @@ def short_message(target, n, must, kept, boundary, vetoed, guard, frozen=None):
             f"{kept}. Raise the target, or " + ", or ".join(fixes) + ".")
 
 
-def resolve_target(n, ratio, count):
-    """The target count from exactly one of ``ratio`` (0..1] or ``count`` (0..n)."""
+def resolve_target(n, ratio, count, guard=None):
+    """The target count from exactly one of ``ratio`` (0..1] or ``count`` (0..n) — or None
+    from neither where the caller takes ``guard`` (the options' guard rule) and it is
+    ``"max_spacing"``: then the guard sets the count (as few points as its limit allows)."""
+    if ratio is None and count is None and guard == "max_spacing":
+        return None
     if (ratio is None) == (count is None):
         raise InputError("give exactly one of ratio= (fraction of points to keep, in (0, 1]) "
                          f"or count= (number of points to keep); got ratio={ratio!r}, "
                          f"count={count!r}." + (
                              " (Or neither, with options.guard='max_spacing': as few points as "
-                             "options.max_spacing allows.)" if ratio is None else ""))
+                             "options.max_spacing allows.)"
+                             if ratio is None and guard is not None else ""))
     if ratio is not None:
         r = float(ratio)
         if not 0.0 < r <= 1.0:

@@ -341,9 +341,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     X, frozen = _validate(xyz, frozen)
     n = X.shape[0]
     covered = None if covered is None else _mask(covered, n, "covered")
-    # the max_spacing guard alone: as few points as the limit allows (the guard sets the count)
-    by_guard = ratio is None and count is None and options.guard == "max_spacing"
-    target = 0 if by_guard else resolve_target(n, ratio, count)
+    target = resolve_target(n, ratio, count, options.guard)
+    by_guard = target is None  # the max_spacing guard alone sets the count
+    if by_guard:
+        target = 0
     stats = {"n_input": n}
     clock = time.perf_counter()
 
@@ -403,7 +404,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     thinned = np.zeros(0, dtype=np.int64)
     sub = None
     guarded = options.guard == "max_spacing"
-    covers_u = None if covered is None else covered[rep]
+    covers_u = covered[rep] if guarded and covered is not None else None
+    P = X[rep] if guarded else None  # the guard measures in the input's own coordinates
     if options.prethin_factor and (to_target > 0 or prethin_target is not None):
         # the subset holds at least ``aim`` points; with ``prethin_target`` it is the same
         # for every count asked (the passes over one tile agree)
@@ -418,8 +420,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
                                  if aim > 0 or not guarded else None,
                                  spacing if spacing is not None else median_spacing(Xu), tie,
                                  least=aim, first=fixed_u & ~never_u, max_radius=cap)
-        if sub is not None and guarded:  # in the input's coordinates, as the guard measures
-            owner_u = prethin_mod.covered_by(X[rep], sub, covers_u, options.max_spacing)
+        if sub is not None and guarded:
+            owner_u = prethin_mod.covered_by(P, sub, covers_u, options.max_spacing)
     if sub is not None:
         thinned = np.flatnonzero(~sub)
         thinned = thinned[np.argsort(tie[thinned], kind="stable")]
@@ -443,11 +445,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     covers_g = (np.ones(m_guard, dtype=bool) if covers_u is None or not m_guard
                 else covers_u if sub is None else covers_u[keep_ids])
     owners = np.full((2, m_guard + (thinned.size if guarded else 0)), -1, dtype=np.int64)
-    cover_xyz = Xg[:m_guard]
-    if guarded:
-        P = X[rep]
-        cover_xyz = np.ascontiguousarray(P if sub is None else np.concatenate(
-            [P[keep_ids], P[thinned]]))
+    cover_xyz = (np.empty((0, 3)) if not guarded else P if sub is None
+                 else np.concatenate([P[keep_ids], P[thinned]]))
     if guarded and thinned.size:
         slot = np.full(m, -1, dtype=np.int64)  # a point's index among the subset's
         slot[keep_ids] = np.arange(keep_ids.size)

@@ -810,9 +810,10 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     if n == 0:
         raise InputError(f"{input}: the input has no points; nothing to simplify. Check that it "
                          "is the file (or glob) you meant.")
-    # the max_spacing guard alone: as few points as the limit allows (the guard sets the count)
-    by_guard = ratio is None and count is None and options.guard == "max_spacing"
-    target = 0 if by_guard else resolve_target(n, ratio, count)
+    target = resolve_target(n, ratio, count, options.guard)
+    by_guard = target is None  # the max_spacing guard alone sets the count
+    if by_guard:
+        target = 0
     if client is None:
         _check_scheduler(scheduler)  # before the ingest, not at the first stage
     if not 0.0 < float(floor) < 1.0:
@@ -1027,8 +1028,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          reached=reached, message=message, refined=refined, seconds=seconds,
                          cpu_seconds=cpu_seconds, peak_rss_mb=_peak_rss_mb(),
                          workers=None if client is not None else workers,
-                         max_spacing=(float(options.max_spacing)
-                                      if options.guard == "max_spacing" else None))
+                         max_spacing=(None if options.max_spacing is None  # no guard
+                                      else float(options.max_spacing)))
     log.info("kept %d of %d points (%d boundary) from %d tiles (%d run deeper) in %.1f s "
              "(%.0f input points/s): %s", n_out, n, n_boundary, ts.n_tiles, n_deeper,
              seconds["total"], n / seconds["total"] if seconds["total"] else 0.0,
