@@ -48,7 +48,14 @@ from ..io.sources import degrees_message, open_source
 from ..tiles import IncompleteStoreError, TileStore
 from .budget import kept_in_tile, merge_passes, plan_cut, store_pass, store_sequences
 from .input_order import InputRanks
-from .tile_refine import cut_hausdorff, is_refined, refine_phases, refine_tile
+from .tile_refine import (
+    MAX_WIDTH,
+    cut_hausdorff,
+    is_refined,
+    refine_phases,
+    refine_tile,
+    refine_width,
+)
 from .tile_task import (
     NORMAL_DTYPE,
     deviation_histogram,
@@ -1055,26 +1062,35 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
         ts.set_run_attrs({"cut": cut, "cut_key": key, "cut_hausdorff": None})
     g = ts.run_attrs.get("cut_hausdorff")
     if g is None:
-        done = _compute(_tile_tasks(cut_hausdorff, range(ts.n_tiles), ts.count,
-                                    lambda i: (str(store_path), i)),
-                        scheduler, workers, client, progress, "gaps")
-        g = max(d["hausdorff"] for d in done)
-        if not g <= ts.halo:
+        def gaps(width):
+            done = _compute(_tile_tasks(cut_hausdorff, range(ts.n_tiles), ts.count,
+                                        lambda i: (str(store_path), i, width)),
+                            scheduler, workers, client, progress, "gaps")
+            return max(d["hausdorff"] for d in done)
+        g = gaps(None)
+        width = refine_width(ts.halo, g)
+        if width is None:
             log.warning("no gap refinement: the cut leaves points %.4g from the nearest kept "
-                        "point, farther than the halo (%.4g); give a wider --halo to refine",
-                        g, ts.halo)
+                        "point, farther than %g halos (%.4g); give a wider --halo to refine",
+                        g, MAX_WIDTH, MAX_WIDTH * ts.halo)
             return False
+        if width > ts.halo:  # beyond the halo the nearest kept point may lie farther out: a
+            g = gaps(width)  # view that wide finds it (g can only fall)
+            log.info("the cut leaves points %.4g from the nearest kept point, beyond the halo "
+                     "(%.4g): the tiles refine in views that wide", g, ts.halo)
         ts.set_run_attrs({"cut_hausdorff": g})
-    phase = refine_phases(ts.plan, ts.halo)
+    width = refine_width(ts.halo, g)
+    phase = refine_phases(ts.plan, width)
     n_phases = int(phase.max()) + 1 if len(phase) else 0
     # a tile waits for its neighbours of earlier phases alone, not for every earlier tile
-    earlier = {i: [int(j) for j in ts.neighbours(i) if phase[j] < phase[i]]
+    earlier = {i: [int(j) for j in ts.neighbours(i, width) if phase[j] < phase[i]]
                for i in range(ts.n_tiles)}
     pending = [i for i in range(ts.n_tiles) if not is_refined(ts, i, key, g)]
     n_done = len(pending)
     if pending:
         _compute(_tile_tasks(refine_tile, sorted(pending, key=lambda i: phase[i]), ts.count,
-                             lambda i: (str(store_path), i, g, earlier[i]), earlier.get),
+                             lambda i: (str(store_path), i, g, earlier[i], width),
+                             earlier.get),
                  scheduler, workers, client, progress, "refine", _refine_line,
                  points=sum(ts.count(i) for i in pending))
     log.info("refined %d tiles in %d phases (cut Hausdorff %.4g) in %.1f s", n_done, n_phases,

@@ -6,7 +6,9 @@ refines after the global cut, one task per tile, in two stages:
 
 1. :func:`cut_hausdorff`: each tile's Hausdorff distance under the cut (its core points to the
    kept points of core and halo). Their maximum ``G`` is the cut's global Hausdorff distance;
-   refinement needs ``G`` at most the halo width (below).
+   refinement needs a view of each tile ``G`` wide (below): the halo, or where ``G`` is wider
+   (small ratios) a view of that width read from the neighbours' cores, after a second pass
+   at that width makes ``G`` exact (:func:`refine_width`).
 2. :func:`refine_tile`, in **phases** (:func:`refine_phases`): a greedy colouring, by tile
    index, of the graph that joins two tiles when one's halo reaches the other's core. A tile
    starts once its neighbours of earlier phases are refined (not every tile of earlier phases:
@@ -23,14 +25,15 @@ refines after the global cut, one task per tile, in two stages:
 **Determinism.** A tile reads the cut and the refined flags of its neighbours of earlier
 phases, which are saved before it starts; its neighbours of later phases start only after it
 ends, and tiles that run beside it are not its neighbours (they do not see each other's
-points). The phases are a fixed function of the tile plan and the halo. So each tile's flags
+points). The phases are a fixed function of the tile plan and the view's width (the halo, or
+``G``). So each tile's flags
 are a fixed function of the cut, whatever the scheduler, worker count or order, and a resumed
 run may keep every tile already refined for the same cut.
 
 **Safety.** A tile removes a point ``c`` only if every point whose nearest kept point is ``c``
 keeps another within ``τ`` (or, for a watched point farther than ``τ``, not at all). That point
 lies within ``G`` of ``c`` (no distance ever exceeds ``G``: each round aims below the tile's
-Hausdorff distance), so within the halo: the tile sees it and every kept point it sees is really
+Hausdorff distance), so within the view: the tile sees it and every kept point it sees is really
 kept while it runs. Points a tile running beside it removes are not in its view, so no
 two tiles remove the two points a point relies on. Hence no point ends farther than ``G``: the
 output's Hausdorff distance is never above the cut's.
@@ -67,12 +70,16 @@ def _kept(store, tile, cut):
     return (step < 0) | (step >= cut[tile])
 
 
-def _view(store, tile, cut, refined=()):
+def _view(store, tile, cut, refined=(), width=None):
     """Core and halo of a tile with the kept flags it sees: ``(xyz, keep, n_core)``. Halo
     points of the tiles in ``refined`` (earlier phases) as they refined them, the rest as the
-    cut keeps them."""
+    cut keeps them. ``width``: the halo's (default the store's, :meth:`TileStore.tile_halo`;
+    a wider one is read from the neighbours' cores, :func:`refine_width`)."""
     core_xyz = store.core_xyz(tile)
-    halo_xyz, _, owner, row = store.tile_halo(tile)
+    if width is None or width <= store.halo:
+        halo_xyz, _, owner, row = store.tile_halo(tile)
+    else:
+        halo_xyz, _, owner, row = store.halo_points(tile, width, owners=True)
     keep = np.zeros(len(core_xyz) + len(halo_xyz), dtype=bool)
     keep[:len(core_xyz)] = _kept(store, tile, cut)
     halo_keep = keep[len(core_xyz):]
@@ -105,14 +112,37 @@ def refine_phases(plan, halo):
     return phase
 
 
-def cut_hausdorff(store_path, tile):
+def refine_width(halo, hausdorff):
+    """The width of the view a tile refines in: the store's ``halo``, or the cut's Hausdorff
+    distance ``G`` where that is wider (the refinement must see every point within ``G`` of
+    a point it removes, see the module notes). None: ``G`` is beyond :data:`MAX_WIDTH` halos
+    (or infinite), too wide a view to read; there is no refinement then.
+
+    Beyond ~7 % kept the cut's ``G`` outgrows the default halo of 10 spacings (the 1M-point
+    scan of ``benchmarks/speed.py``: ``G`` 5.4 / 8.1 / 12.2 / 33 spacings at 20 / 10 / 5 / 2
+    %); until 2026-12-05 those runs were not refined at all (at 5 %: Hausdorff 0.0423 against
+    0.0295 refined). The tile pass keeps the store's halo, so runs whose ``G`` fits in it
+    are unchanged."""
+    if not hausdorff <= MAX_WIDTH * halo:
+        return None
+    return max(float(halo), float(hausdorff))
+
+
+#: a tile refines in a view at most this many halos wide (:func:`refine_width`): at 6 halos
+#: (60 spacings by default) a tile of 125,000 points on a surface reads ~1.8x its core
+MAX_WIDTH = 6.0
+
+
+def cut_hausdorff(store_path, tile, width=None):
     """The largest distance from a core point of ``tile`` to the cut's kept points (of its
-    core and halo; inf if none is kept). Returns ``{"tile", "hausdorff", "seconds"}``."""
+    core and halo — ``width`` wide, by default the store's; inf if none is kept: a distance
+    beyond the width may be overstated, never understated). Returns ``{"tile",
+    "hausdorff", "seconds"}``."""
     t0 = time.perf_counter()
     compile_cache.wait()  # a compile ahead running on this machine
     store = TileStore.open(store_path)
     cut, _ = _cut(store)
-    xyz, keep, n_core = _view(store, tile, cut)
+    xyz, keep, n_core = _view(store, tile, cut, width=width)
     h = 0.0
     gone = xyz[:n_core][~keep[:n_core]]  # a kept core point is 0 from the kept points
     if gone.size:
@@ -120,7 +150,7 @@ def cut_hausdorff(store_path, tile):
     return {"tile": int(tile), "hausdorff": h, "seconds": time.perf_counter() - t0}
 
 
-def refine_tile(store_path, tile, hausdorff, earlier=(), after=()):
+def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, after=()):
     """Refine one tile's kept core points after the global cut; save them in the store.
 
     Parameters
@@ -133,6 +163,8 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), after=()):
     earlier : sequence of int
         The neighbours of ``tile`` in earlier phases: their refined flags are read (they must
         be saved), the cut's for every other neighbour.
+    width : float, optional
+        The view's halo width, :func:`refine_width` (default: the store's halo).
     after : sequence, ignored
         The scheduler's handle on the tasks that refine ``earlier`` (their results), so that
         this one runs after them.
@@ -155,7 +187,7 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), after=()):
     compile_cache.wait()  # a compile ahead running on this machine
     store = TileStore.open(store_path)
     cut, key = _cut(store)
-    xyz, keep, n_core = _view(store, tile, cut, earlier)
+    xyz, keep, n_core = _view(store, tile, cut, earlier, width)
     info = {"swaps": 0, "hausdorff_before": 0.0, "hausdorff_after": 0.0}
     fixed = np.ones(len(xyz), dtype=bool)
     fixed[:n_core] = store.read_result(tile, "boundary")
