@@ -1068,14 +1068,14 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
                             scheduler, workers, client, progress, "gaps")
             return max(d["hausdorff"] for d in done)
         g = gaps(None)
-        width = refine_width(ts.halo, g)
-        if width is None:
-            log.warning("no gap refinement: the cut leaves points %.4g from the nearest kept "
-                        "point, farther than %g halos (%.4g); give a wider --halo to refine",
-                        g, MAX_WIDTH, MAX_WIDTH * ts.halo)
-            return False
-        if width > ts.halo:  # beyond the halo the nearest kept point may lie farther out: a
-            g = gaps(width)  # view that wide finds it (g can only fall)
+        if not g <= ts.halo:  # a view only this wide may miss a nearer kept point beyond it:
+            wide = min(g, MAX_WIDTH * ts.halo)  # in one as wide as g (or the widest read) each
+            g = gaps(wide)  # distance up to its width is exact, so a largest one within is G
+            if not g <= wide:
+                log.warning("no gap refinement: the cut leaves points %.4g from the nearest kept "
+                            "point, farther than %g halos (%.4g); give a wider --halo to refine",
+                            g, MAX_WIDTH, MAX_WIDTH * ts.halo)
+                return False
             log.info("the cut leaves points %.4g from the nearest kept point, beyond the halo "
                      "(%.4g): the tiles refine in views that wide", g, ts.halo)
         ts.set_run_attrs({"cut_hausdorff": g})

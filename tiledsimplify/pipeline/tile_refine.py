@@ -118,11 +118,11 @@ def refine_width(halo, hausdorff):
     a point it removes, see the module notes). None: ``G`` is beyond :data:`MAX_WIDTH` halos
     (or infinite), too wide a view to read; there is no refinement then.
 
-    Beyond ~7 % kept the cut's ``G`` outgrows the default halo of 10 spacings (the 1M-point
-    scan of ``benchmarks/speed.py``: ``G`` 5.4 / 8.1 / 12.2 / 33 spacings at 20 / 10 / 5 / 2
-    %); until 2026-12-05 those runs were not refined at all (at 5 %: Hausdorff 0.0423 against
-    0.0295 refined). The tile pass keeps the store's halo, so runs whose ``G`` fits in it
-    are unchanged."""
+    Below ~7 % kept the cut's ``G`` outgrows the default halo of 10 spacings (the 1M-point
+    scan of ``benchmarks/speed.py``: ``G`` 5.4 / 8.1 / 12.2 / 31 spacings at 20 / 10 / 5 / 2
+    %); until 2026-12-04 (late night) such runs were not refined at all (at 5 %: Hausdorff
+    0.0423 against 0.0296 refined). The tile pass keeps the store's halo, so runs whose ``G``
+    fits in it give the same output as before."""
     if not hausdorff <= MAX_WIDTH * halo:
         return None
     return max(float(halo), float(hausdorff))
