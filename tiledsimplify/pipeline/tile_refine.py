@@ -10,7 +10,7 @@ refines after the global cut, one task per tile, in two stages:
    (small ratios) a view of that width read from the neighbours' cores, after a second pass
    at that width makes ``G`` exact (:func:`refine_width`).
 2. :func:`refine_tile`, in **phases** (:func:`refine_phases`): a greedy colouring, by tile
-   index, of the graph that joins two tiles when one's halo reaches the other's core. A tile
+   index, of the graph that joins two tiles when one's view reaches the other's core. A tile
    starts once its neighbours of earlier phases are refined (not every tile of earlier phases:
    no barrier between phases), so tiles of one phase, and of different phases that are not
    neighbours, run in parallel. A tile sees its halo as the tiles of earlier phases refined it
