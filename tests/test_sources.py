@@ -163,6 +163,32 @@ def test_blank_and_comment_lines_are_not_points(tmp_path, cloud):
         assert open_source(tmp_path / "e.xyz").count == 0
 
 
+def test_a_header_after_comment_lines_is_a_header(tmp_path, cloud):
+    """The header and the delimiter come from the first line that is neither blank nor a
+    ``#`` comment, as in the in-memory reader (``read_points``): only the file's first line
+    was looked at, so a header after a comment ('# exported by …' then 'x y z') failed as
+    'unreadable point line at line 2', and a comment with a comma made the whitespace-separated
+    numbers unreadable."""
+    from tiledsimplify.io.columns import read_columns
+    rows = [f"{x!r} {y!r} {z!r}" for x, y, z in cloud.tolist()]
+    texts = {"h.xyz": "# exported by a scanner\nX Y Z\n" + "\n".join(rows) + "\n",
+             "comma.xyz": "# units: mm, frame: part\n" + "\n".join(rows) + "\n",
+             "blank.txt": "\n\n# c\n\tx\ty\tz\n" + "\n".join(rows) + "\n",
+             "h.csv": "# c\nx,y,z,sharp_edge\n"
+                      + "\n".join(r.replace(" ", ",") + ",1" for r in rows) + "\n"}
+    for name, text in texts.items():
+        path = tmp_path / name
+        path.write_text(text)
+        for chunk in (100, 10_000):
+            src, xyz = _chunked(path, chunk)
+            assert src.count == len(cloud), name
+            np.testing.assert_array_equal(xyz, cloud)
+        np.testing.assert_array_equal(read_points(path), cloud)
+    xyz, cols = read_columns(tmp_path / "h.csv")
+    np.testing.assert_array_equal(xyz, cloud)
+    assert set(cols) == {"sharp_edge"} and (cols["sharp_edge"] == 1).all()
+
+
 def test_a_run_on_text_with_blank_last_lines_keeps_the_count(tmp_path, cloud):
     from tiledsimplify.pipeline import run
     path = tmp_path / "t.xyz"
