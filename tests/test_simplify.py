@@ -157,6 +157,32 @@ def test_options_of_the_wrong_type_are_named(bad, message):
     assert ok.edge_width == 1 and ok.reach_spacings == float("inf")
 
 
+@pytest.mark.parametrize("bad,message", [
+    ({"prethin": float("inf")}, "prethin must be 0"),  # OverflowError in simplify_points
+    ({"spacing": float("inf")}, "spacing must be a positive"),  # ran, on no spacing at all
+    ({"coverage": float("inf")}, "coverage must be a positive"),  # every importance inf
+    ({"edge_width": float("inf")}, "edge_width must be a positive"),  # every point flagged
+])
+def test_infinite_options_are_refused_by_name(bad, message):
+    """Infinities passed the "positive" checks: prethin=inf crashed the call with a bare
+    OverflowError, the others ran to a meaningless result (edge_width=inf: every point a
+    boundary point, the target missed)."""
+    with pytest.raises(InputError, match=message):
+        SimplifyOptions(**bad)
+
+
+@pytest.mark.parametrize("count", [float("nan"), float("inf"), -float("inf"), "12", 2.5])
+def test_a_count_that_is_no_integer_is_named(count):
+    """count=nan / inf raised numpy's bare ValueError / OverflowError ('cannot convert float
+    NaN to integer'), naming neither count nor the fix."""
+    X = _surface(200, seed=3)
+    with pytest.raises(InputError, match="count must be an integer between 0 and"):
+        simplify_points(X, count=count)
+    res = simplify_points(X, ratio=1.0)
+    with pytest.raises(InputError, match="count must be an integer between 0 and"):
+        res.keep_at(count=count)
+
+
 def test_frozen_points_are_kept_and_still_neighbours():
     X = _surface(2000, seed=1)
     frozen = X[:, 0] < 1.0
