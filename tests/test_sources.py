@@ -346,3 +346,17 @@ def test_semicolon_csv_reads_as_comma_csv(tmp_path, cloud):
     with pytest.raises(InputError, match=r"n.xyz: line 4 \(point 1\) has a NaN or infinite "
                                          r"coordinate: '4 nan 6' \(2 such lines"):
         list(open_source(tmp_path / "n.xyz", chunk_points=10).chunks())
+
+
+def test_a_list_of_non_las_files_says_to_give_one_or_merge(tmp_path, cloud):
+    """A list of two PLY files was refused with 'Convert other formats first (e.g. `pdal
+    translate in.e57 out.laz`)': E57 is read natively, and one PLY is too — the fix is one
+    file or a merge."""
+    paths = []
+    for name in ("a.ply", "b.ply"):
+        write_points(tmp_path / name, cloud)
+        paths.append(str(tmp_path / name))
+    with pytest.raises(FileFormatError, match=r"a\.ply: unsupported suffix '\.ply' among LAS "
+                       r"input.*Give one file of another format.*pdal merge") as err:
+        open_source(paths)
+    assert "in.e57" not in str(err.value)
