@@ -183,6 +183,21 @@ def test_a_count_that_is_no_integer_is_named(count):
         res.keep_at(count=count)
 
 
+def test_a_spacing_in_the_wrong_units_warns(data_dir):
+    """options.spacing 100x too small (millimetres given for metres) left every point without
+    a Voronoi neighbour within the reach: no edge flags, an arbitrary removal order, and no
+    word of it. It warns now, naming the measured spacing; the result is unchanged."""
+    X = read_points(data_dir / "meshes" / "stanford_bunny" / "bun_zipper.ply.gz")[::6]
+    with pytest.warns(UserWarning, match=r"options.spacing=1e-05 is far below these "
+                      r"points' spacing \(the median nearest-neighbour distance is 0\.00"):
+        res = simplify_points(X, ratio=0.1, options=SimplifyOptions(spacing=1e-5))
+    assert res.count == round(0.1 * len(X)) and not res.boundary.any()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the measured spacing, or one near it: no warning
+        simplify_points(X, ratio=0.1)
+        simplify_points(X, ratio=0.1, options=SimplifyOptions(spacing=0.0005))
+
+
 def test_frozen_points_are_kept_and_still_neighbours():
     X = _surface(2000, seed=1)
     frozen = X[:, 0] < 1.0

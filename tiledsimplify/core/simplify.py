@@ -379,6 +379,17 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     stats["neighbours"] = st.how
     stats["mean_voronoi_degree"] = float(st.cnt.mean()) if m else 0.0
     stats["mean_local_mesh_degree"] = float(st.dn_cnt.mean()) if m else 0.0
+    if options.spacing is not None and m >= 10 and stats["mean_voronoi_degree"] < 1:
+        # a spacing in the wrong units: no point has a neighbour within the reach, so no
+        # normals, no edge flags and a removal order by the tie-break alone — said, not silent
+        warnings.warn(f"options.spacing={options.spacing!r} is far below these points' "
+                      f"spacing (the median nearest-neighbour distance is "
+                      f"{median_spacing(Xu):.6g}): within the reach of "
+                      f"{options.reach_spacings:g} spacings the points have "
+                      f"{stats['mean_voronoi_degree']:.3g} neighbours on average, so no "
+                      "sharp edge is found and the removal order is arbitrary. Give the "
+                      "spacing in the points' units, or leave it out (None) to measure it.",
+                      UserWarning, stacklevel=2)
     lap("neighbours_normals")
     deviation_u, boundary_u, threshold = boundary_flags(Xu, st, options)
     lap("boundary")
