@@ -645,9 +645,11 @@ def test_cli_run_with_config(bunny, tmp_path, caplog):
     ({"chunk_points": 0}, "chunk_points must be at least 1"),  # range() arg 3 must not be 0
     ({"chunk_points": -1}, "chunk_points must be at least 1"),  # "the input has no points"
     ({"chunk_points": float("nan")}, "chunk_points must be a whole number"),  # ValueError
+    ({"halo": "wide"}, "halo must be a distance"),  # could not convert string to float
+    ({"halo": "1"}, "halo must be a distance"),  # ran, a str in the store's settings
 ])
 def test_run_names_a_bad_argument(tmp_path, kw, message):
-    """``run``'s options and chunk_points were used unchecked: a string for options failed
+    """``run``'s options, chunk_points and halo were used unchecked: a string for options failed
     with "'str' object has no attribute 'guard'", chunk_points=0 with "range() arg 3 must not
     be zero" and -1 with "the input has no points" — nothing naming the argument."""
     path = tmp_path / "in.npy"

@@ -18,6 +18,7 @@ import hashlib
 import json
 import logging
 import math
+import numbers
 import os
 import shutil
 import socket
@@ -809,6 +810,11 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"options must be a SimplifyOptions, a dict of its fields or None, "
                          f"got {options!r}; e.g. options=SimplifyOptions(mode='paper') or "
                          "options={'mode': 'paper'}.")
+    if halo is not None and (isinstance(halo, (bool, np.bool_, str))
+                             or not isinstance(halo, numbers.Real)):  # 'wide': ValueError
+        raise InputError(f"halo must be a distance in the input's units (a number), got "
+                         f"{halo!r}; leave it out for the default (10 x the estimated "
+                         "spacing).")
     chunk_points = _whole(chunk_points, "chunk_points")
     if chunk_points is None or chunk_points < 1:  # 0: "range() arg 3 must not be zero"
         raise InputError(f"chunk_points must be at least 1, got {chunk_points!r}; leave it "
