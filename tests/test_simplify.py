@@ -198,6 +198,24 @@ def test_a_spacing_in_the_wrong_units_warns(data_dir):
         simplify_points(X, ratio=0.1, options=SimplifyOptions(spacing=0.0005))
 
 
+@pytest.mark.parametrize("mode", ["coverage", "paper"])
+def test_a_far_outlier_that_costs_the_neighbours_warns(data_dir, mode):
+    """One point 1e6 away from the Bunny (a garbage point at the origin of a georeferenced
+    cloud, say) made every Voronoi facet of the Bunny "degenerate" (thinner than 1e-8 of the
+    extent): mean degree 0, no edge flags, an arbitrary removal order — silently. It warns
+    now, naming the cause and the fix; the result is unchanged."""
+    X = read_points(data_dir / "meshes" / "stanford_bunny" / "bun_zipper.ply.gz")[::6]
+    options = SimplifyOptions(mode=mode, reach=12.0)
+    with pytest.warns(UserWarning, match=r"the points span 1e\+06 \(bounding-box diagonal\), "
+                      r".* times their spacing .*Remove far outliers"):
+        res = simplify_points(np.r_[X, [[1e6, 0.0, 0.0]]], ratio=0.1, options=options)
+    assert res.stats["mean_voronoi_degree"] < 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # 1e3 away: the neighbourhoods hold, no warning
+        res = simplify_points(np.r_[X, [[1e3, 0.0, 0.0]]], ratio=0.1, options=options)
+    assert res.stats["mean_voronoi_degree"] > 10
+
+
 def test_frozen_points_are_kept_and_still_neighbours():
     X = _surface(2000, seed=1)
     frozen = X[:, 0] < 1.0
