@@ -152,6 +152,27 @@ def test_cli_evaluate(cloud, tmp_path, capsys, caplog, data_dir):
     assert main(["evaluate", str(pts), str(tmp_path / "nope.xyz")]) == EXIT_INPUT
 
 
+@pytest.mark.parametrize("suffix", [".npy", ".ply", ".csv"])
+def test_evaluate_an_all_points_output_measures_its_kept_points(cloud, tmp_path, capsys,
+                                                                 suffix):
+    """``evaluate`` measured an ``--all-points`` output as if every point were kept:
+    Hausdorff 0, n_kept the whole input. It reads the kept points from ``simplify_rank``
+    (-1), as ``report`` does, and scores what the kept-only output scores."""
+    import json
+    _, path = cloud
+    kept, every = tmp_path / f"k{suffix}", tmp_path / f"all{suffix}"
+    assert main(["simplify", str(path), str(kept), "--ratio", "0.3", "-q"]) == EXIT_OK
+    assert main(["simplify", str(path), str(every), "--ratio", "0.3", "--all-points",
+                 "-q"]) == EXIT_OK
+    capsys.readouterr()
+    got = []
+    for result in (kept, every):
+        assert main(["evaluate", str(path), str(result), "--json", "-q"]) == EXIT_OK
+        got.append(json.loads(capsys.readouterr().out))
+    assert got[1]["n_kept"] == 360 and got[1]["hausdorff"] > 0
+    assert got[1] == got[0]
+
+
 def test_bad_output_fails_before_the_work(cloud, tmp_path, caplog, monkeypatch):
     """A missing output directory, a directory or an unknown suffix as the output is reported
     before any point is read or simplified (a long run must not fail only at the end)."""

@@ -675,6 +675,26 @@ def test_cli_run_with_config(bunny, tmp_path, caplog):
         run(path, out, ratio=0.3, tile_points=2.5)  # not 2-point tiles
 
 
+@pytest.mark.parametrize("kw,message", [
+    ({"options": "paper"}, "options must be a SimplifyOptions, a dict"),  # AttributeError
+    ({"options": [("mode", "paper")]}, "options must be a SimplifyOptions"),
+    ({"chunk_points": 0}, "chunk_points must be at least 1"),  # range() arg 3 must not be 0
+    ({"chunk_points": -1}, "chunk_points must be at least 1"),  # "the input has no points"
+    ({"chunk_points": float("nan")}, "chunk_points must be a whole number"),  # ValueError
+    ({"halo": "wide"}, "halo must be a distance"),  # could not convert string to float
+    ({"halo": "1"}, "halo must be a distance"),  # ran, a str in the store's settings
+])
+def test_run_names_a_bad_argument(tmp_path, kw, message):
+    """``run``'s options, chunk_points and halo were used unchecked: a string for options failed
+    with "'str' object has no attribute 'guard'", chunk_points=0 with "range() arg 3 must not
+    be zero" and -1 with "the input has no points" — nothing naming the argument."""
+    path = tmp_path / "in.npy"
+    np.save(path, np.random.default_rng(0).random((300, 3)))
+    with pytest.raises(InputError, match=message):
+        run(path, tmp_path / "out.npy", ratio=0.3, scheduler="synchronous", **kw)
+    assert not (tmp_path / "out.npy").exists()
+
+
 @pytest.mark.parametrize("case", ["bunny", "fandisk_scan"])
 def test_tiles_do_not_show(case, bunny, data_dir, tmp_path):
     from tiledsimplify import metrics, synthetic

@@ -157,6 +157,65 @@ def test_options_of_the_wrong_type_are_named(bad, message):
     assert ok.edge_width == 1 and ok.reach_spacings == float("inf")
 
 
+@pytest.mark.parametrize("bad,message", [
+    ({"prethin": float("inf")}, "prethin must be 0"),  # OverflowError in simplify_points
+    ({"spacing": float("inf")}, "spacing must be a positive"),  # ran, on no spacing at all
+    ({"coverage": float("inf")}, "coverage must be a positive"),  # every importance inf
+    ({"edge_width": float("inf")}, "edge_width must be a positive"),  # every point flagged
+])
+def test_infinite_options_are_refused_by_name(bad, message):
+    """Infinities passed the "positive" checks: prethin=inf crashed the call with a bare
+    OverflowError, the others ran to a meaningless result (edge_width=inf: every point a
+    boundary point, the target missed)."""
+    with pytest.raises(InputError, match=message):
+        SimplifyOptions(**bad)
+
+
+@pytest.mark.parametrize("count", [float("nan"), float("inf"), -float("inf"), "12", 2.5])
+def test_a_count_that_is_no_integer_is_named(count):
+    """count=nan / inf raised numpy's bare ValueError / OverflowError ('cannot convert float
+    NaN to integer'), naming neither count nor the fix."""
+    X = _surface(200, seed=3)
+    with pytest.raises(InputError, match="count must be an integer between 0 and"):
+        simplify_points(X, count=count)
+    res = simplify_points(X, ratio=1.0)
+    with pytest.raises(InputError, match="count must be an integer between 0 and"):
+        res.keep_at(count=count)
+
+
+def test_a_spacing_in_the_wrong_units_warns(data_dir):
+    """options.spacing 100x too small (millimetres given for metres) left every point without
+    a Voronoi neighbour within the reach: no edge flags, an arbitrary removal order, and no
+    word of it. It warns now, naming the measured spacing; the result is unchanged."""
+    X = read_points(data_dir / "meshes" / "stanford_bunny" / "bun_zipper.ply.gz")[::6]
+    with pytest.warns(UserWarning, match=r"options.spacing=1e-05 is far below these "
+                      r"points' spacing \(the median nearest-neighbour distance is 0\.00"):
+        res = simplify_points(X, ratio=0.1, options=SimplifyOptions(spacing=1e-5))
+    assert res.count == round(0.1 * len(X)) and not res.boundary.any()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the measured spacing, or one near it: no warning
+        simplify_points(X, ratio=0.1)
+        simplify_points(X, ratio=0.1, options=SimplifyOptions(spacing=0.0005))
+
+
+@pytest.mark.parametrize("mode", ["coverage", "paper"])
+def test_a_far_outlier_that_costs_the_neighbours_warns(data_dir, mode):
+    """One point 1e6 away from the Bunny (a garbage point at the origin of a georeferenced
+    cloud, say) made every Voronoi facet of the Bunny "degenerate" (thinner than 1e-8 of the
+    extent): mean degree 0, no edge flags, an arbitrary removal order — silently. It warns
+    now, naming the cause and the fix; the result is unchanged."""
+    X = read_points(data_dir / "meshes" / "stanford_bunny" / "bun_zipper.ply.gz")[::6]
+    options = SimplifyOptions(mode=mode, reach=12.0)
+    with pytest.warns(UserWarning, match=r"the points span 1e\+06 \(bounding-box diagonal\), "
+                      r".* times their spacing .*Remove far outliers"):
+        res = simplify_points(np.r_[X, [[1e6, 0.0, 0.0]]], ratio=0.1, options=options)
+    assert res.stats["mean_voronoi_degree"] < 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # 1e3 away: the neighbourhoods hold, no warning
+        res = simplify_points(np.r_[X, [[1e3, 0.0, 0.0]]], ratio=0.1, options=options)
+    assert res.stats["mean_voronoi_degree"] > 10
+
+
 def test_frozen_points_are_kept_and_still_neighbours():
     X = _surface(2000, seed=1)
     frozen = X[:, 0] < 1.0

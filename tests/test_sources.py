@@ -163,6 +163,32 @@ def test_blank_and_comment_lines_are_not_points(tmp_path, cloud):
         assert open_source(tmp_path / "e.xyz").count == 0
 
 
+def test_a_header_after_comment_lines_is_a_header(tmp_path, cloud):
+    """The header and the delimiter come from the first line that is neither blank nor a
+    ``#`` comment, as in the in-memory reader (``read_points``): only the file's first line
+    was looked at, so a header after a comment ('# exported by …' then 'x y z') failed as
+    'unreadable point line at line 2', and a comment with a comma made the whitespace-separated
+    numbers unreadable."""
+    from tiledsimplify.io.columns import read_columns
+    rows = [f"{x!r} {y!r} {z!r}" for x, y, z in cloud.tolist()]
+    texts = {"h.xyz": "# exported by a scanner\nX Y Z\n" + "\n".join(rows) + "\n",
+             "comma.xyz": "# units: mm, frame: part\n" + "\n".join(rows) + "\n",
+             "blank.txt": "\n\n# c\n\tx\ty\tz\n" + "\n".join(rows) + "\n",
+             "h.csv": "# c\nx,y,z,sharp_edge\n"
+                      + "\n".join(r.replace(" ", ",") + ",1" for r in rows) + "\n"}
+    for name, text in texts.items():
+        path = tmp_path / name
+        path.write_text(text)
+        for chunk in (100, 10_000):
+            src, xyz = _chunked(path, chunk)
+            assert src.count == len(cloud), name
+            np.testing.assert_array_equal(xyz, cloud)
+        np.testing.assert_array_equal(read_points(path), cloud)
+    xyz, cols = read_columns(tmp_path / "h.csv")
+    np.testing.assert_array_equal(xyz, cloud)
+    assert set(cols) == {"sharp_edge"} and (cols["sharp_edge"] == 1).all()
+
+
 def test_a_run_on_text_with_blank_last_lines_keeps_the_count(tmp_path, cloud):
     from tiledsimplify.pipeline import run
     path = tmp_path / "t.xyz"
@@ -320,3 +346,17 @@ def test_semicolon_csv_reads_as_comma_csv(tmp_path, cloud):
     with pytest.raises(InputError, match=r"n.xyz: line 4 \(point 1\) has a NaN or infinite "
                                          r"coordinate: '4 nan 6' \(2 such lines"):
         list(open_source(tmp_path / "n.xyz", chunk_points=10).chunks())
+
+
+def test_a_list_of_non_las_files_says_to_give_one_or_merge(tmp_path, cloud):
+    """A list of two PLY files was refused with 'Convert other formats first (e.g. `pdal
+    translate in.e57 out.laz`)': E57 is read natively, and one PLY is too — the fix is one
+    file or a merge."""
+    paths = []
+    for name in ("a.ply", "b.ply"):
+        write_points(tmp_path / name, cloud)
+        paths.append(str(tmp_path / name))
+    with pytest.raises(FileFormatError, match=r"a\.ply: unsupported suffix '\.ply' among LAS "
+                       r"input.*Give one file of another format.*pdal merge") as err:
+        open_source(paths)
+    assert "in.e57" not in str(err.value)

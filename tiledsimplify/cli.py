@@ -316,6 +316,18 @@ def _evaluate(args):
     from .io import read_mesh
     sources = _check_pair(args.original, args.simplified, "evaluating", "Evaluate")
     original, kept = (read_all(s) for s in sources)
+    if len(kept) == len(original) and np.array_equal(kept, original):
+        # an --all-points output: every input point with its rank, -1 the kept ones (as
+        # `report` reads it); measured whole, it scored a perfect Hausdorff distance of 0
+        from .io.columns import read_columns
+        rank = read_columns(args.simplified)[1].get("simplify_rank")
+        if rank is not None:
+            kept = original[np.asarray(rank) == -1]
+            log.info("%s: an --all-points output; measuring its %s kept points (rank -1)",
+                     args.simplified, f"{len(kept):,}")
+            if not len(kept):
+                raise InputError(f"{args.simplified}: no point has simplify_rank -1 (kept); "
+                                 "nothing to measure.")
     kw = {"spacing": args.spacing}
     if args.mesh:
         V, F = read_mesh(args.mesh)

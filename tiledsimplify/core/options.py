@@ -215,14 +215,15 @@ class SimplifyOptions:
                              f"config's [simplify]), not with guard={self.guard!r}; set it, or "
                              "drop max_spacing.")
         for name in ("edge_width", "coverage"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"options.{name} must be positive, got {getattr(self, name)!r}.")
+            if not 0 < getattr(self, name) < float("inf"):
+                raise InputError(f"options.{name} must be a positive (finite) number, got "
+                                 f"{getattr(self, name)!r}.")
         if not 0 < self.edge_angle <= 90:
             raise InputError("options.edge_angle must be a fold in degrees, above 0 and at most "
                              f"90 (default {MIN_ANGLE:g}), got {self.edge_angle!r}.")
-        if self.spacing is not None and not self.spacing > 0:
-            raise InputError("options.spacing must be a positive distance in model units or "
-                             f"None, got {self.spacing!r}.")
+        if self.spacing is not None and not 0 < self.spacing < float("inf"):
+            raise InputError("options.spacing must be a positive (finite) distance in model "
+                             f"units or None, got {self.spacing!r}.")
         if self.reach is not None and not self.reach > 0:
             raise InputError("options.reach must be a positive number of spacings, inf (the "
                              f"paper's unbounded neighbourhoods) or None, got {self.reach!r}.")
@@ -230,7 +231,8 @@ class SimplifyOptions:
                 self.progressive_until == self.progressive_until):  # not NaN
             raise InputError("options.progressive_until must be a number (an importance "
                              f"level) or None, got {self.progressive_until!r}.")
-        if self.prethin is not None and not (self.prethin == 0 or self.prethin >= 1):
+        if self.prethin is not None and not (self.prethin == 0
+                                             or 1 <= self.prethin < float("inf")):
             raise InputError("options.prethin must be 0 (off), a multiple of the target of at "
                              f"least 1, or None (the mode's default), got {self.prethin!r}.")
         if not self.boundary_k > 0:

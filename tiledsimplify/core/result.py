@@ -115,8 +115,11 @@ def resolve_target(n, ratio, count, guard=None):
             raise InputError(f"ratio must be in (0, 1], got {ratio!r}; use count= for an "
                              "absolute number of points.")
         return int(round(r * n))
-    c = int(count)
-    if c != count or not 0 <= c <= n:
+    try:  # NaN and inf: int() raised ValueError / OverflowError without naming count
+        c = int(count)
+    except (TypeError, ValueError, OverflowError):
+        c = None
+    if c is None or c != count or not 0 <= c <= n:
         raise InputError(f"count must be an integer between 0 and the number of points ({n}),"
                          f" got {count!r}.")
     return c

@@ -83,11 +83,13 @@ def read_columns(path):
         return read_points(path), {}
     if suffix in TEXT_SUFFIXES:
         skip, delimiter = _text_header(path)
-        if skip:
+        if skip:  # the header is the line before the first point (after any comments)
             with open(path, encoding="ascii", errors="replace") as fh:
-                names = fh.readline().replace(",", " ").replace(";", " ").split()
+                for _ in range(skip):
+                    line = fh.readline()
+            names = line.replace(",", " ").replace(";", " ").replace('"', " ").split()
             if set(_XYZ) <= set(names):
-                table = np.loadtxt(path, delimiter=delimiter, skiprows=1, ndmin=2)
+                table = np.loadtxt(path, delimiter=delimiter, skiprows=skip, ndmin=2)
                 if table.shape[1] == len(names):
                     return _split({name: table[:, i] for i, name in enumerate(names)})
     return read_points(path), {}

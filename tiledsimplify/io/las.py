@@ -134,9 +134,10 @@ def _files_of_one(spec) -> list[Path]:
     if path.is_file():
         if not _is_las(path):
             raise FileFormatError(
-                f"{path}: unsupported suffix '{path.suffix}'; LAS input must be a "
-                f"{'/'.join(LAS_SUFFIXES)} file, a folder of them or a glob pattern. Convert "
-                "other formats first (e.g. `pdal translate in.e57 out.laz`).")
+                f"{path}: unsupported suffix '{path.suffix}' among LAS input; only LAS/LAZ "
+                "(and E57) files are read as one cloud from a list, a folder or a glob "
+                "pattern. Give one file of another format (PLY, XYZ/CSV/TXT, NPY...), or "
+                "merge them first, e.g. `pdal merge a.ply b.ply merged.laz`.")
         return [path]
     if path.is_dir():
         files = sorted(p for p in path.iterdir() if p.is_file())

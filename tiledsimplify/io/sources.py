@@ -420,21 +420,35 @@ def _first_bad_line(lines, delimiter):
 
 
 def _text_header(path):
-    """(lines to skip, delimiter) of an XYZ/CSV/TXT file, from its first line: a header if it
-    does not start with three numbers; commas if it has any, else semicolons if it has any
-    (CloudCompare's and spreadsheets' other CSV; the in-memory reader's rule, ``io.mesh``),
-    else whitespace."""
+    """(lines to skip, delimiter) of an XYZ/CSV/TXT file, from its first point line (the first
+    neither blank nor a ``#`` comment, :func:`_is_point_line`): a header if it does not start
+    with three numbers; the delimiter from the first line of numbers — commas if it has any,
+    else semicolons if it has any (CloudCompare's and spreadsheets' other CSV; the in-memory
+    reader's rule, ``io.mesh``), else whitespace. Until 2026-12-04 only the file's first line
+    was looked at, so a header after a ``#`` comment line was read as a point (an error), and
+    a comment or header with a comma set the delimiter of whitespace-separated numbers."""
+    skip, header, data = 0, False, None
     with open(path, "rb") as fh:
-        first = fh.readline()
-    line = first.decode("ascii", errors="replace")
-    delimiter = "," if "," in line else ";" if ";" in line else None
-    tokens = line.replace(",", " ").replace(";", " ").split()
-    try:
-        [float(t) for t in tokens[:3]]
-        header = len(tokens) < 3
-    except ValueError:
-        header = True
-    return int(header), delimiter
+        for index, raw in enumerate(fh):
+            line = raw.decode("ascii", errors="replace")
+            if not _is_point_line(line):
+                continue
+            tokens = line.replace(",", " ").replace(";", " ").split()
+            try:
+                [float(t) for t in tokens[:3]]
+                is_header = len(tokens) < 3
+            except ValueError:
+                is_header = True
+            if is_header and not header and data is None:
+                skip, header = index + 1, True  # the one header line: look on for numbers
+                continue
+            if not header:
+                skip = index
+            data = line
+            break
+    sample = data if data is not None else ""
+    delimiter = "," if "," in sample else ";" if ";" in sample else None
+    return skip, delimiter
 
 
 def _text_layout(path, chunk_points):

@@ -10,6 +10,7 @@ finished tiles are not recomputed, and the output is rewritten from the stored r
 """
 
 import collections
+import collections.abc
 import concurrent.futures
 import contextlib
 import dataclasses
@@ -17,6 +18,7 @@ import hashlib
 import json
 import logging
 import math
+import numbers
 import os
 import shutil
 import socket
@@ -809,8 +811,21 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         clock[:] = now
     if options is None:
         options = SimplifyOptions()
-    elif isinstance(options, dict):
+    elif isinstance(options, collections.abc.Mapping):
         options = SimplifyOptions.from_mapping(options)
+    elif not isinstance(options, SimplifyOptions):  # was an AttributeError on .guard
+        raise InputError(f"options must be a SimplifyOptions, a dict of its fields or None, "
+                         f"got {options!r}; e.g. options=SimplifyOptions(mode='paper') or "
+                         "options={'mode': 'paper'}.")
+    if halo is not None and (isinstance(halo, (bool, np.bool_, str))
+                             or not isinstance(halo, numbers.Real)):  # 'wide': ValueError
+        raise InputError(f"halo must be a distance in the input's units (a number), got "
+                         f"{halo!r}; leave it out for the default (10 x the estimated "
+                         "spacing).")
+    chunk_points = _whole(chunk_points, "chunk_points")
+    if chunk_points is None or chunk_points < 1:  # 0: "range() arg 3 must not be zero"
+        raise InputError(f"chunk_points must be at least 1, got {chunk_points!r}; leave it "
+                         "out for the default (1,000,000 points a chunk).")
     output = Path(output)
     source = open_source(input, chunk_points=chunk_points)
     n = source.count
