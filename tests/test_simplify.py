@@ -199,21 +199,29 @@ def test_a_spacing_in_the_wrong_units_warns(data_dir):
 
 
 @pytest.mark.parametrize("mode", ["coverage", "paper"])
-def test_a_far_outlier_that_costs_the_neighbours_warns(data_dir, mode):
-    """One point 1e6 away from the Bunny (a garbage point at the origin of a georeferenced
-    cloud, say) made every Voronoi facet of the Bunny "degenerate" (thinner than 1e-8 of the
-    extent): mean degree 0, no edge flags, an arbitrary removal order — silently. It warns
-    now, naming the cause and the fix; the result is unchanged."""
+def test_a_far_outlier_costs_the_others_no_neighbours(data_dir, mode):
+    """One point far from the Bunny (a garbage point at the origin of a georeferenced cloud,
+    say) made every Voronoi facet of the Bunny "degenerate" (thinner than 1e-8 of the
+    diagonal), and at 1e9 away its triangulation lost most edges: mean degree 0 at 1e6, no
+    edge flags, an arbitrary removal order — silently. The facet tolerance is now at most
+    SCALE_SPACINGS spacings and a point alone beyond twice the reach is left out of the
+    triangulation: the Bunny keeps its neighbours and flags. Two parts that far apart still
+    lose theirs, and that is said."""
     X = read_points(data_dir / "meshes" / "stanford_bunny" / "bun_zipper.ply.gz")[::6]
     options = SimplifyOptions(mode=mode, reach=12.0)
-    with pytest.warns(UserWarning, match=r"the points span 1e\+06 \(bounding-box diagonal\), "
-                      r".* times their spacing .*Remove far outliers"):
-        res = simplify_points(np.r_[X, [[1e6, 0.0, 0.0]]], ratio=0.1, options=options)
-    assert res.stats["mean_voronoi_degree"] < 1
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # 1e3 away: the neighbourhoods hold, no warning
-        res = simplify_points(np.r_[X, [[1e3, 0.0, 0.0]]], ratio=0.1, options=options)
-    assert res.stats["mean_voronoi_degree"] > 10
+    alone = simplify_points(X, ratio=0.1, options=options)
+    for far in (1e6, 1e9):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            res = simplify_points(np.r_[X, [[far, 0.0, 0.0]]], ratio=0.1, options=options)
+        assert res.stats["mean_voronoi_degree"] == pytest.approx(
+            alone.stats["mean_voronoi_degree"], rel=0.01)
+        assert abs(int(res.boundary[:-1].sum()) - int(alone.boundary.sum())) <= 0.01 * len(X)
+    with pytest.warns(UserWarning, match=r"the points span 1e\+09 \(bounding-box diagonal\), "
+                      r".* times their spacing .*left without a Voronoi neighbour.*Simplify "
+                      r"far-apart parts separately"):
+        res = simplify_points(np.r_[X, X + [1e9, 0.0, 0.0]], ratio=0.1, options=options)
+    assert res.stats["mean_voronoi_degree"] < 2
 
 
 def test_frozen_points_are_kept_and_still_neighbours():

@@ -27,7 +27,8 @@ from .options import SimplifyOptions
 from .refine import protected, refine_coverage
 from .removal import GUARDS, remove_points
 from .result import SimplifyResult, resolve_target, short_message
-from .voronoi import BOX_FACTOR, TOL_FACTOR, scale_of, voronoi_neighbours
+from .voronoi import (BOX_FACTOR, SCALE_SPACINGS, TOL_FACTOR, scale_of,
+                      voronoi_neighbours)
 from .zorder import distinct
 
 #: the peak memory of :func:`simplify_points` per input point beyond the points themselves,
@@ -241,6 +242,16 @@ def _prepare(X, frozen):
     return rep, inverse, Xu, scale_of(Xu)
 
 
+def _scale(Xu, D, spacing):
+    """The length the Voronoi tolerances are relative to (:func:`.voronoi.scale_of`): the
+    diagonal ``D``, at most ``SCALE_SPACINGS`` spacings (``spacing``, else measured), so that
+    a far outlier does not make the other points' facets degenerate."""
+    if D <= SCALE_SPACINGS * (spacing or 0.0):
+        return D  # (no need to measure the spacing: the diagonal is below the cap)
+    s = spacing if spacing is not None else median_spacing(Xu)
+    return min(D, SCALE_SPACINGS * s) if s > 0 else D
+
+
 def neighbourhood_state(xyz, frozen=None, options=None):
     """Paper steps 1-2 (``VN_p``, ``DN_p``, normals) and the boundary measure, once.
 
@@ -265,24 +276,31 @@ def neighbourhood_state(xyz, frozen=None, options=None):
     options = _options(options)
     X, frozen = _validate(xyz, frozen)
     _, inverse, Xu, D = _prepare(X, frozen)
-    st = neighbourhoods(Xu, D, reach_length(Xu, options))
+    spacing = None
+    if options.importance == "coverage" or math.isfinite(options.reach_spacings):
+        spacing = _spacing(Xu, options)
+    st = neighbourhoods(Xu, _scale(Xu, D, spacing), reach_length(Xu, options, spacing))
     deviation_u = np.zeros(Xu.shape[0])
     boundary_mod.all_deviations(Xu, st.normals, st.dn, st.dn_cnt, deviation_u)
     return st, deviation_u[inverse]
 
 
-#: the extent of a cloud, in point spacings, past which facets of its Voronoi cells thinner
-#: than ``voronoi.TOL_FACTOR`` of the extent — 1 % of a spacing and more — count as degenerate
-#: and are dropped: neighbours are lost. The Bunny with one point 1e4 of its size away: mean
-#: Voronoi degree 12.7 -> 11.5, 1e5 away 4.0, 1e6 away 0 (no edge flags, an arbitrary order)
+#: the extent of a cloud, in point spacings, past which the triangulation's floating point
+#: can lose neighbours. Facet tolerances are capped at ``voronoi.SCALE_SPACINGS`` spacings and
+#: a lone far outlier is left out of the triangulation (the Bunny with a point 1e9 of its size
+#: away: mean Voronoi degree 12.18 against 12.20 alone), but two parts that far apart each
+#: keep almost none (two Bunnies 1e9 apart: 0.83; 1e6 apart: 12.88, as one)
 EXTENT_SPACINGS = 0.01 / TOL_FACTOR
+#: ... and the share of points left without a Voronoi neighbour above which that is said
+LOST_SHARE = 0.01
 
 
-def _warn_lost_neighbours(Xu, D, options, spacing, degree):
-    """Warn where the Voronoi neighbourhoods of ``Xu`` (extent ``D``) lose their neighbours,
-    rather than simplify silently without them: a ``spacing`` option far below the points'
-    (the wrong units), or an extent of more than :data:`EXTENT_SPACINGS` spacings (a far
-    outlier, such as a point at the origin of a UTM cloud, or far-apart parts)."""
+def _warn_lost_neighbours(Xu, D, options, spacing, degree, lonely):
+    """Warn where the Voronoi neighbourhoods of ``Xu`` (bounding-box diagonal ``D``) lose
+    their neighbours, rather than simplify silently without them: a ``spacing`` option far
+    below the points' (the wrong units), or an extent of more than :data:`EXTENT_SPACINGS`
+    spacings with more than :data:`LOST_SHARE` of the points (``lonely``) left without a
+    neighbour (far-apart parts)."""
     m = Xu.shape[0]
     if m < 10:
         return
@@ -299,14 +317,14 @@ def _warn_lost_neighbours(Xu, D, options, spacing, degree):
                           "the points' units, or leave it out (None) to measure it.",
                           UserWarning, stacklevel=3)
             return
-    if s > 0 and D > EXTENT_SPACINGS * s:
+    if s > 0 and D > EXTENT_SPACINGS * s and lonely > LOST_SHARE:
         warnings.warn(f"the points span {D:.6g} (bounding-box diagonal), {D / s:.3g} times "
-                      f"their spacing ({s:.6g}): Voronoi facets thinner than "
-                      f"{TOL_FACTOR:g} of the span count as degenerate, so neighbours are "
-                      f"lost (mean Voronoi degree {degree:.3g}; a surface has 10-15) and "
-                      "with them edge flags and the removal order. Remove far outliers (a "
-                      "point at the origin of a georeferenced cloud, say), or simplify "
-                      "far-apart parts separately.",
+                      f"their spacing ({s:.6g}), and {lonely:.0%} of them were left without "
+                      f"a Voronoi neighbour (mean Voronoi degree {degree:.3g}; a surface has "
+                      "10-15): parts that far apart are beyond the triangulation's floating "
+                      "point, and without neighbours no edge is flagged and the removal order "
+                      "is arbitrary. Simplify far-apart parts separately (or remove the far "
+                      "points, if they are outliers).",
                       UserWarning, stacklevel=3)
 
 
@@ -402,6 +420,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     if options.importance == "coverage" or math.isfinite(options.reach_spacings):
         spacing = _spacing(Xu, options)
     reach = reach_length(Xu, options, spacing)
+    diagonal, D = D, _scale(Xu, D, spacing)
     if state is None:
         st = neighbourhoods(Xu, D, reach)
     elif state.cnt.size != m:
@@ -418,7 +437,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     stats["neighbours"] = st.how
     stats["mean_voronoi_degree"] = float(st.cnt.mean()) if m else 0.0
     stats["mean_local_mesh_degree"] = float(st.dn_cnt.mean()) if m else 0.0
-    _warn_lost_neighbours(Xu, D, options, spacing, stats["mean_voronoi_degree"])
+    _warn_lost_neighbours(Xu, diagonal, options, spacing, stats["mean_voronoi_degree"],
+                          float((st.cnt == 0).mean()) if m else 0.0)
     lap("neighbours_normals")
     deviation_u, boundary_u, threshold = boundary_flags(Xu, st, options)
     lap("boundary")

@@ -71,6 +71,12 @@ BOX_FACTOR = 100.0
 TOL_FACTOR = 1e-8
 #: Qhull sees the points shifted by up to this much (relative to the largest coordinate)
 JITTER = 1e-10
+#: the length the tolerances above are relative to is at most this many point spacings
+#: (:func:`scale_of`): relative to the diagonal alone, one far outlier (a point at the origin
+#: of a georeferenced cloud) made every thin facet "degenerate" — the Bunny with a point 1e6
+#: of its size away kept a mean Voronoi degree of 0 instead of 12.7, and lost its edge flags.
+#: Clouds up to 1e5 spacings across (every benchmark case) are unchanged
+SCALE_SPACINGS = 1e5
 
 
 #: every this many constraints, :func:`facet_positive` (in the removal loop) tries the
@@ -508,22 +514,38 @@ def _far_kernel(xyz, start, G, lo, h, dims, r2):
     return far
 
 
-def candidate_edges(X, reach=math.inf):
+def candidate_edges(X, reach=math.inf, scale=None):
     """Candidate Voronoi-neighbour pairs of distinct points ``X`` (a superset of the true ones
     within ``reach``; of all of them if ``reach`` is infinite).
+
+    ``scale`` (:func:`scale_of`): the shift the triangulation sees is ``JITTER`` of it at most
+    (of the largest centred coordinate otherwise): a far outlier no longer shifts the others by
+    a sizeable share of their spacing. Where ``scale`` is below the diagonal (the cloud spans
+    more than ``SCALE_SPACINGS`` spacings) and ``reach`` is finite, points with no other point
+    within twice the reach — no facet of theirs can lie within the reach of both its points —
+    are left out of the triangulation: a point 1e9 spacings away (the origin of a UTM cloud)
+    left the others a few hundred millionths of the unit the predicates work in, and the
+    Bunny with one kept 49k of its ~250k candidate edges (mean Voronoi degree 1.9) after 10 s.
 
     Returns ``(edges, how)`` where ``how`` names the construction used.
     """
     n = X.shape[0]
     if n <= 1:
         return np.empty((0, 2), dtype=np.int64), "trivial"
+    if n > 5 and math.isfinite(reach) and scale is not None and scale < scale_of(X):
+        alone = cell_grid.nearest_other(X) > 2.0 * reach
+        if alone.any():
+            rest = np.flatnonzero(~alone)
+            edges, how = candidate_edges(X[rest], reach, scale)
+            return rest[edges], how
     if n <= 5:
         return _all_pairs(n), "all pairs"
     rank = affine_rank(X)
     C = X - X.mean(axis=0)
-    scale = np.abs(C).max()
-    C = C / scale
-    C += JITTER * np.random.default_rng(12345).uniform(-1.0, 1.0, C.shape)
+    extent = np.abs(C).max()
+    C = C / extent
+    jitter = JITTER if scale is None or scale >= extent else JITTER * (scale / extent)
+    C += jitter * np.random.default_rng(12345).uniform(-1.0, 1.0, C.shape)
     if rank <= 1:
         # points on a line: the chain along it
         _, _, vt = np.linalg.svd(C, full_matrices=False)
@@ -543,7 +565,7 @@ def candidate_edges(X, reach=math.inf):
         if math.isfinite(reach):  # end the far cells (see guard_points)
             G = guard_points(X, reach)
             if G.shape[0]:
-                C = np.concatenate([C, (G - X.mean(axis=0)) / scale])
+                C = np.concatenate([C, (G - X.mean(axis=0)) / extent])
             simplices = delaunay_tets(C)  # ~5x faster than Qhull; None if it failed
             fallback = " (compiled Delaunay failed)"
         if simplices is None:
@@ -556,11 +578,14 @@ def candidate_edges(X, reach=math.inf):
     return _simplex_edges(simplices, n), how
 
 
-def scale_of(X):
-    """The length scale the facet tolerances are relative to: the bounding-box diagonal."""
+def scale_of(X, spacing=None):
+    """The length scale the facet tolerances are relative to: the bounding-box diagonal, but
+    at most :data:`SCALE_SPACINGS` times the points' ``spacing`` where one is given."""
     if X.shape[0] == 0:
         return 1.0
     d = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0)))
+    if spacing is not None and spacing > 0.0:
+        d = min(d, SCALE_SPACINGS * float(spacing))
     return d if d > 0.0 else 1.0
 
 
@@ -585,8 +610,8 @@ def voronoi_neighbours(X, slack=8, scale=None, reach=math.inf):
     """
     X = np.ascontiguousarray(X, dtype=np.float64)
     n = X.shape[0]
-    edges, how = candidate_edges(X, reach)
     D = scale_of(X) if scale is None else float(scale)
+    edges, how = candidate_edges(X, reach, D)
     start, cnt, cap, pool, meta = adjacency.from_edges(n, edges, slack=0, room=1)  # read only
     kept = filter_candidates(X, start, cnt, pool, BOX_FACTOR * D, TOL_FACTOR * D, float(reach))
     return adjacency.from_edges(n, kept, slack=slack), how
