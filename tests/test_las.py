@@ -722,6 +722,42 @@ def test_corrupt_and_truncated_files(tmp_path):
             pass
 
 
+def test_points_far_outside_the_header_box_are_refused(tmp_path):
+    """A LAZ file damaged in its middle (a block of zeros: bit rot, a partial copy) decodes
+    without an error to points far from the cloud; they used to be simplified into the output
+    (exit 0). Points far outside the header's bounding box are refused, naming the file;
+    a stale header (points a little outside) and an unset one (all zero) still read."""
+    raw = bytearray(lidar_file(AUTZEN).read_bytes())
+    middle = len(raw) // 2
+    raw[middle:middle + 5000] = bytes(5000)
+    bad = tmp_path / "damaged.laz"
+    bad.write_bytes(bytes(raw))
+    src = LasSource(bad)  # the headers and chunk table are fine
+    with pytest.raises(FileFormatError, match=r"damaged\.laz: .* of its points .* lie far "
+                                              r"outside the bounding box its header gives"):
+        src.read_all()
+
+    las = tmp_path / "small.las"
+    xyz = small_las(las, AUTZEN, slice(0, 5000))
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+
+    def with_header_box(path, mins, maxs):
+        data = bytearray(las.read_bytes())
+        for axis in range(3):  # max x, min x, max y, min y, max z, min z from byte 179
+            data[179 + 16 * axis:187 + 16 * axis] = np.float64(maxs[axis]).tobytes()
+            data[187 + 16 * axis:195 + 16 * axis] = np.float64(mins[axis]).tobytes()
+        path.write_bytes(bytes(data))
+        return path
+
+    stale = with_header_box(tmp_path / "stale.las", lo + 0.3 * (hi - lo), hi)
+    np.testing.assert_array_equal(LasSource(stale).read_all()[0], xyz)
+    unset = with_header_box(tmp_path / "unset.las", np.zeros(3), np.zeros(3))
+    np.testing.assert_array_equal(LasSource(unset).read_all()[0], xyz)
+    far = with_header_box(tmp_path / "far.las", lo + 1e4, hi + 1e4)
+    with pytest.raises(FileFormatError, match=r"far\.las: 5,000 of its points 0 to 4,999"):
+        LasSource(far).read_all()
+
+
 def test_folder_reads_every_laz(tmp_path):
     # several real files in a folder (symlinks keep it cheap): one cloud, consecutive indices
     for name in (AUTZEN, LONE_STAR):
