@@ -259,6 +259,23 @@ def test_folder_and_glob_read_as_one_cloud(tmp_path):
     np.testing.assert_allclose(maxs, expected.max(axis=0))
 
 
+def test_files_with_and_without_crs_records_are_warned_of(tmp_path):
+    """A folder whose first file has no CRS records (its tiles' others have) gave an output
+    without a CRS, silently: only CRS descriptions that both existed were compared."""
+    small_las(tmp_path / "b.las", AUTZEN, slice(0, 300))
+    las = laspy.read(tmp_path / "b.las")
+    las.header.vlrs.clear()
+    las.write(tmp_path / "a.las")
+    with pytest.warns(UserWarning, match=r"different CRS .*takes the first file's CRS, here "
+                                         r"none\): a\.las: no CRS records; b\.las: PROJCS"):
+        src = LasSource(tmp_path)
+    assert src.crs is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        LasSource(tmp_path / "b.las")
+        LasSource([tmp_path / "a.las", tmp_path / "a.las"])
+
+
 def test_mixed_point_formats_read_but_do_not_write(tmp_path):
     small_las(tmp_path / "a.las", AUTZEN, slice(0, 300))      # PF 3 (with RGB)
     small_las(tmp_path / "b.las", LONE_STAR, slice(0, 200))   # PF 1

@@ -572,15 +572,22 @@ class LasSource:
         self.chunk_points = int(chunk_points)
         self.files = las_files(spec)
         self.infos = [_read_info(p) for p in self.files]
-        crs = {i.crs for i in self.infos if i.crs is not None}
+        # files with CRS records and files without count as different too: a LAS/LAZ
+        # output takes the first file's records, so a first file without them left the
+        # output without a CRS, silently
+        crs = {i.crs for i in self.infos}
         if len(crs) > 1:
             warnings.warn("LAS/LAZ files with different CRS descriptions are read as one cloud, "
                           "their coordinates as they are (not reprojected; a LAS/LAZ output "
-                          "takes the first file's CRS): "
-                          + "; ".join(f"{i.path.name}: {_short(i.crs)}" for i in self.infos)
+                          "takes the first file's CRS"
+                          + (", here none" if self.infos[0].crs is None else "") + "): "
+                          + "; ".join(f"{i.path.name}: {_short(i.crs) or 'no CRS records'}"
+                                      for i in self.infos)
                           + ". Reproject them to one CRS first if they differ in more than "
                           "how it is written (e.g. `pdal translate in.laz out.laz reprojection "
-                          "--filters.reprojection.out_srs=EPSG:XXXX`).",
+                          "--filters.reprojection.out_srs=EPSG:XXXX`), or assign it to "
+                          "the files without one (`pdal translate a.laz b.laz "
+                          "--writers.las.a_srs=EPSG:XXXX`).",
                           UserWarning, stacklevel=2)
         first = self.infos[0]
         common = []
