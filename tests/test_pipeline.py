@@ -940,7 +940,7 @@ def test_a_store_that_cannot_be_written_fails_before_the_ingest(bunny, tmp_path,
                        (tmp_path / "made" / "t", tmp_path / "made")):
         with caplog.at_level("INFO", logger="tiledsimplify"), pytest.raises(
                 InputError, match=rf"{where.name}: the tile store's directory {bad} is not "
-                                  r"writable; give --store a directory you can write to"):
+                                  r"writable \(permission denied\); give --store a directory you can write to"):
             run(path, tmp_path / "o.npy", ratio=0.2, store=where, tile_points=3000)
         assert "ingest" not in caplog.text and not (tmp_path / "o.npy").exists()
     with pytest.raises(InputError, match=r"bunny.npy: is a file, not a tile store directory"):

@@ -39,6 +39,7 @@ from ..io import points_out
 from ..io.las import LAS_SUFFIXES
 from ..io.points_out import (
     PointsAt,
+    cannot_write_in,
     check_not_input,
     check_output,
     check_space,
@@ -430,9 +431,13 @@ def _check_store_writable(store_path):
             raise InputError(f"{store_path}: is a file, not a tile store directory; give "
                              f"--store {STORE_FIX}.")
         return  # a file on the way: the lock's mkdir names it
-    if where is not None and not os.access(where, os.W_OK | os.X_OK):
-        raise InputError(f"{store_path}: the tile store's directory {where} is not writable; "
-                         "give --store a directory you can write to.")
+    if where is None:
+        return
+    why = None if os.access(where, os.W_OK | os.X_OK) else "permission denied"
+    why = why or cannot_write_in(where)
+    if why:
+        raise InputError(f"{store_path}: the tile store's directory {where} is not writable "
+                         f"({why}); give --store a directory you can write to.")
 
 
 #: seconds beyond dask's connect timeout (``distributed.comm.timeouts.connect``) that a run
