@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import re
 import shutil
 import warnings
 from pathlib import Path
@@ -360,6 +361,43 @@ def test_run_refuses_files_off_the_output_grid_before_the_tiles(tmp_path, caplog
         run(folder, tmp_path / "out.laz", ratio=0.5, store=tmp_path / "store")
     assert "ingested 6,000 points" in caplog.text and "tile 0" not in caplog.text
     assert sorted(p.name for p in tmp_path.iterdir()) == [".store.lock", "in", "store"]
+
+
+def test_run_warns_of_files_on_another_grid_than_the_first(tmp_path, caplog):
+    """A folder merging files of another scale or offset: the LAS/LAZ output takes the first
+    file's grid and rounds the others' kept points to it (up to half a step) — silently
+    until now. Offsets a whole number of steps away and coarser multiples move nothing."""
+    import logging
+
+    from tiledsimplify.pipeline import run
+    folder = tmp_path / "in"
+    folder.mkdir()
+    small_las(folder / "a.las", AUTZEN, slice(0, 1500))
+    small_las(folder / "b.las", AUTZEN, slice(1500, 3000), offsets=[1000.0, -20.0, 3.0])
+    with caplog.at_level(logging.WARNING, logger="tiledsimplify"):
+        run(folder, tmp_path / "same.laz", ratio=0.5, progress=False)
+    assert "another grid" not in caplog.text
+    fine = laspy.read(lidar_file(AUTZEN))
+    header = laspy.LasHeader(point_format=fine.header.point_format, version=fine.header.version)
+    header.scales, header.offsets = np.array([0.001] * 3), np.array([636000.0, 849000.0, 0.0])
+    header.vlrs.extend(fine.header.vlrs)  # the same CRS
+    c = laspy.LasData(header)
+    c.points = laspy.ScaleAwarePointRecord.zeros(1500, header=header)
+    for name in fine.point_format.dimension_names:
+        if name not in ("X", "Y", "Z"):
+            c[name] = fine[name][3000:4500]
+    c.x, c.y, c.z = (getattr(fine, a)[3000:4500] + 0.003 for a in "xyz")
+    c.write(folder / "c.las")
+    with caplog.at_level(logging.WARNING, logger="tiledsimplify"):
+        run(folder, tmp_path / "moved.laz", ratio=0.5, progress=False)
+    assert re.search(r"moved\.laz: 1 input file\(s\) are on another grid than the first "
+                     r"file's \(a\.las: scales \[0\.01, 0\.01, 0\.01\].*move by up to half a "
+                     r"step on each axis \(c\.las: scales \[0\.001, 0\.001, 0\.001\]",
+                     caplog.text)
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="tiledsimplify"):
+        run(folder, tmp_path / "moved.npy", ratio=0.5, progress=False)  # coordinates as read
+    assert "another grid" not in caplog.text
 
 
 def test_run_refuses_to_write_over_its_input(tmp_path, monkeypatch):

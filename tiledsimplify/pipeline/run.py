@@ -829,6 +829,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     _warn_read_back(input, output, source)
     _warn_leftovers(output)
     _check_layout(output, source)
+    _warn_regrid(output, source)
     _check_room(output, target * _record_bytes(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
     if workers is not None and workers < 1:
@@ -1131,6 +1132,33 @@ def _warn_leftovers(output):
                     "it take %.1f MB beside it (%s); delete them unless another run is writing "
                     "%s now.", output, len(left), size / 1e6, ", ".join(p.name for p in left),
                     output.name)
+
+
+def _warn_regrid(output, source):
+    """Warn when a LAS/LAZ output moves points of input files on another grid than the
+    first file's, which it takes (:func:`regrids`): a file of finer scales, or offsets off
+    the first file's steps, has its kept points rounded to that grid — up to half a step on
+    each axis — where a folder merging two deliveries lost their precision silently."""
+    if output.suffix.lower() not in LAS_SUFFIXES or not source.is_las:
+        return
+    steps, origin = source.scales, source.offsets
+    moved = []
+    for info in source.infos[1:]:
+        ratio = np.asarray(info.scales, dtype=np.float64) / steps
+        shift = (np.asarray(info.offsets, dtype=np.float64) - origin) / steps
+        if not (np.allclose(ratio, np.round(ratio), rtol=0, atol=1e-6) and np.all(ratio >= 1)
+                and np.allclose(shift, np.round(shift), rtol=0, atol=1e-6)):
+            moved.append(info)
+    if moved:
+        log.warning(
+            "%s: %d input file(s) are on another grid than the first file's (%s: scales %s, "
+            "offsets %s), which the output takes: their kept points move by up to half a step "
+            "on each axis (%s: scales %s, offsets %s%s). Give the files one scale and offset "
+            "first (e.g. `pdal translate in.laz out.laz --writers.las.scale_x=… "
+            "--writers.las.offset_x=…`).", output, len(moved), source.infos[0].path.name,
+            steps.tolist(), origin.tolist(), moved[0].path.name,
+            np.asarray(moved[0].scales).tolist(), np.asarray(moved[0].offsets).tolist(),
+            "" if len(moved) == 1 else f"; and {len(moved) - 1} more")
 
 
 def _check_layout(output, source):
