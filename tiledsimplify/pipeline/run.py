@@ -549,11 +549,18 @@ def _check_scheduler(scheduler):
                          f"got {scheduler!r}.")
 
 
-def _pool_process():
+def _pool_process(run_pid=None):
     """Initializer of a :func:`_process_pool` process: dask's, and on Linux the process ends
     with its parent (``PR_SET_PDEATHSIG``). A run killed outright (SIGKILL: the OOM killer, a
     batch system past its grace period) left its pool's processes behind, orphaned: they ran
-    every queued tile on, writing into the store no run held, and then idled on."""
+    every queued tile on, writing into the store no run held, and then idled on.
+
+    ``run_pid``: the run's process, which started this one (spawn, fork; None for a
+    forkserver's). A run killed while its pool's processes still started (importing the
+    package, seconds on a slow file system) left them orphaned before this ran, and the
+    parent then seen was the orphans' reaper."""
+    if run_pid is not None and os.getppid() != run_pid:
+        os._exit(1)  # the run died before this process got here
     from dask.multiprocessing import initialize_worker_process
     initialize_worker_process()
     if sys.platform.startswith("linux"):
@@ -581,8 +588,11 @@ def _process_pool(workers):
     from dask.multiprocessing import get_context
     if os.environ.get("PYTHONHASHSEED") in (None, "0"):
         os.environ["PYTHONHASHSEED"] = "6640"  # as dask sets it for the pools it makes
-    pool = ProcessPoolExecutor(workers or machine.cpus(), mp_context=get_context(),
-                               initializer=_pool_process)
+    context = get_context()
+    pool = ProcessPoolExecutor(workers or machine.cpus(), mp_context=context,
+                               initializer=_pool_process, initargs=(
+                                   os.getpid() if context.get_start_method() in ("spawn", "fork")
+                                   else None,))
     try:
         yield pool
     except BaseException:
