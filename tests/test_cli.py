@@ -302,6 +302,24 @@ def test_a_failed_run_still_writes_its_summary(tmp_path):
         "exit_code": EXIT_INPUT, "error": f"{missing}: file not found. Check the path."}
 
 
+@pytest.mark.parametrize("bad", [["--ratio", "0"], ["--ratio", "0.5", "--bogus"]])
+def test_a_run_refused_by_its_arguments_still_writes_its_summary(tmp_path, bad):
+    """A usage error (argparse's own, exit 2) left the summary of the run before in place —
+    exit code 0 to a pipeline that reads the file."""
+    import json
+
+    summary = tmp_path / "run.json"
+    summary.write_text(json.dumps({"exit_code": 0}))  # an earlier run's
+    with pytest.raises(SystemExit) as stopped:
+        main(["run", str(tmp_path / "in.laz"), str(tmp_path / "o.laz"), *bad,
+              "--summary", str(summary)])
+    assert stopped.value.code == EXIT_INPUT
+    got = json.loads(summary.read_text())
+    assert got["exit_code"] == EXIT_INPUT
+    assert got["error"].startswith("tiledsimplify") and "error: " in got["error"]
+    assert bad[-1] in got["error"]
+
+
 def test_evaluate_an_empty_cloud_names_the_file(cloud, tmp_path, caplog):
     """It said "`kept` must contain at least 1 point(s); got 0. Fix: pass a non-empty point
     set." (the Python API's words), naming neither file nor side."""

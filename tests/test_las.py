@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import re
 import shutil
 import warnings
 from pathlib import Path
@@ -259,6 +260,23 @@ def test_folder_and_glob_read_as_one_cloud(tmp_path):
     np.testing.assert_allclose(maxs, expected.max(axis=0))
 
 
+def test_files_with_and_without_crs_records_are_warned_of(tmp_path):
+    """A folder whose first file has no CRS records (its tiles' others have) gave an output
+    without a CRS, silently: only CRS descriptions that both existed were compared."""
+    small_las(tmp_path / "b.las", AUTZEN, slice(0, 300))
+    las = laspy.read(tmp_path / "b.las")
+    las.header.vlrs.clear()
+    las.write(tmp_path / "a.las")
+    with pytest.warns(UserWarning, match=r"different CRS .*takes the first file's CRS, here "
+                                         r"none\): a\.las: no CRS records; b\.las: PROJCS"):
+        src = LasSource(tmp_path)
+    assert src.crs is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        LasSource(tmp_path / "b.las")
+        LasSource([tmp_path / "a.las", tmp_path / "a.las"])
+
+
 def test_mixed_point_formats_read_but_do_not_write(tmp_path):
     small_las(tmp_path / "a.las", AUTZEN, slice(0, 300))      # PF 3 (with RGB)
     small_las(tmp_path / "b.las", LONE_STAR, slice(0, 200))   # PF 1
@@ -343,6 +361,43 @@ def test_run_refuses_files_off_the_output_grid_before_the_tiles(tmp_path, caplog
         run(folder, tmp_path / "out.laz", ratio=0.5, store=tmp_path / "store")
     assert "ingested 6,000 points" in caplog.text and "tile 0" not in caplog.text
     assert sorted(p.name for p in tmp_path.iterdir()) == [".store.lock", "in", "store"]
+
+
+def test_run_warns_of_files_on_another_grid_than_the_first(tmp_path, caplog):
+    """A folder merging files of another scale or offset: the LAS/LAZ output takes the first
+    file's grid and rounds the others' kept points to it (up to half a step) — silently
+    until now. Offsets a whole number of steps away and coarser multiples move nothing."""
+    import logging
+
+    from tiledsimplify.pipeline import run
+    folder = tmp_path / "in"
+    folder.mkdir()
+    small_las(folder / "a.las", AUTZEN, slice(0, 1500))
+    small_las(folder / "b.las", AUTZEN, slice(1500, 3000), offsets=[1000.0, -20.0, 3.0])
+    with caplog.at_level(logging.WARNING, logger="tiledsimplify"):
+        run(folder, tmp_path / "same.laz", ratio=0.5, progress=False)
+    assert "another grid" not in caplog.text
+    fine = laspy.read(lidar_file(AUTZEN))
+    header = laspy.LasHeader(point_format=fine.header.point_format, version=fine.header.version)
+    header.scales, header.offsets = np.array([0.001] * 3), np.array([636000.0, 849000.0, 0.0])
+    header.vlrs.extend(fine.header.vlrs)  # the same CRS
+    c = laspy.LasData(header)
+    c.points = laspy.ScaleAwarePointRecord.zeros(1500, header=header)
+    for name in fine.point_format.dimension_names:
+        if name not in ("X", "Y", "Z"):
+            c[name] = fine[name][3000:4500]
+    c.x, c.y, c.z = (getattr(fine, a)[3000:4500] + 0.003 for a in "xyz")
+    c.write(folder / "c.las")
+    with caplog.at_level(logging.WARNING, logger="tiledsimplify"):
+        run(folder, tmp_path / "moved.laz", ratio=0.5, progress=False)
+    assert re.search(r"moved\.laz: 1 input file\(s\) are on another grid than the first "
+                     r"file's \(a\.las: scales \[0\.01, 0\.01, 0\.01\].*move by up to half a "
+                     r"step on each axis \(c\.las: scales \[0\.001, 0\.001, 0\.001\]",
+                     caplog.text)
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="tiledsimplify"):
+        run(folder, tmp_path / "moved.npy", ratio=0.5, progress=False)  # coordinates as read
+    assert "another grid" not in caplog.text
 
 
 def test_run_refuses_to_write_over_its_input(tmp_path, monkeypatch):
@@ -720,6 +775,42 @@ def test_corrupt_and_truncated_files(tmp_path):
     with pytest.raises(FileFormatError, match=r"small\.las: truncated.*5000 points.*2500"):
         for _ in src.chunks():
             pass
+
+
+def test_points_far_outside_the_header_box_are_refused(tmp_path):
+    """A LAZ file damaged in its middle (a block of zeros: bit rot, a partial copy) decodes
+    without an error to points far from the cloud; they used to be simplified into the output
+    (exit 0). Points far outside the header's bounding box are refused, naming the file;
+    a stale header (points a little outside) and an unset one (all zero) still read."""
+    raw = bytearray(lidar_file(AUTZEN).read_bytes())
+    middle = len(raw) // 2
+    raw[middle:middle + 5000] = bytes(5000)
+    bad = tmp_path / "damaged.laz"
+    bad.write_bytes(bytes(raw))
+    src = LasSource(bad)  # the headers and chunk table are fine
+    with pytest.raises(FileFormatError, match=r"damaged\.laz: .* of its points .* lie far "
+                                              r"outside the bounding box its header gives"):
+        src.read_all()
+
+    las = tmp_path / "small.las"
+    xyz = small_las(las, AUTZEN, slice(0, 5000))
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+
+    def with_header_box(path, mins, maxs):
+        data = bytearray(las.read_bytes())
+        for axis in range(3):  # max x, min x, max y, min y, max z, min z from byte 179
+            data[179 + 16 * axis:187 + 16 * axis] = np.float64(maxs[axis]).tobytes()
+            data[187 + 16 * axis:195 + 16 * axis] = np.float64(mins[axis]).tobytes()
+        path.write_bytes(bytes(data))
+        return path
+
+    stale = with_header_box(tmp_path / "stale.las", lo + 0.3 * (hi - lo), hi)
+    np.testing.assert_array_equal(LasSource(stale).read_all()[0], xyz)
+    unset = with_header_box(tmp_path / "unset.las", np.zeros(3), np.zeros(3))
+    np.testing.assert_array_equal(LasSource(unset).read_all()[0], xyz)
+    far = with_header_box(tmp_path / "far.las", lo + 1e4, hi + 1e4)
+    with pytest.raises(FileFormatError, match=r"far\.las: 5,000 of its points 0 to 4,999"):
+        LasSource(far).read_all()
 
 
 def test_folder_reads_every_laz(tmp_path):

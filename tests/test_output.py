@@ -194,3 +194,43 @@ def test_run_checks_the_space_for_a_new_tile_store_before_the_work(tmp_path, mon
         (tmp_path / "out.npy").unlink()
         run(tmp_path / "in.npy", tmp_path / "out.npy", ratio=0.5, store=store)
         assert len(np.load(tmp_path / "out.npy")) == 1000
+
+
+def _unwritable_dir(tmp_path):
+    """A directory in which no file can be made, though ``os.access`` may say yes (root)."""
+    import os
+    from pathlib import Path
+    if os.geteuid() != 0:
+        locked = tmp_path / "locked"
+        locked.mkdir(mode=0o555)
+        return locked
+    if not Path("/proc").is_dir():
+        pytest.skip("no /proc to stand for a directory root cannot write in")
+    return Path("/proc")
+
+
+def test_an_output_directory_access_calls_writable_is_refused_before_the_work(
+        tmp_path, monkeypatch):
+    """``os.access`` says yes to root — a container's usual user — where a write then fails
+    (a read-only or SELinux-labelled bind mount, /proc, /sys): `run … /sys/out.laz` did the
+    whole run and then failed, exit 1, naming a hidden temporary file; so did a --summary
+    or --store there. Now a file is made and removed in the directory first."""
+    import importlib
+    import os
+
+    from tiledsimplify.errors import InputError
+    from tiledsimplify.io import points_out
+    from tiledsimplify.io.points_out import check_output, check_writable
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    where = _unwritable_dir(tmp_path)
+    monkeypatch.setattr(os, "access", lambda p, mode: True)
+    for check in (check_output, check_writable):
+        with pytest.raises(InputError, match=rf"out\.npy: the output directory {where} is not "
+                                             r"writable \(.+\); choose a directory"):
+            check(where / "out.npy")
+    with pytest.raises(InputError, match=rf"the tile store's directory {where} is not "
+                                         r"writable \(.+\); give --store"):
+        R._check_store_writable(where / "store")
+    assert points_out.cannot_write_in(tmp_path) is None
+    assert [p.name for p in tmp_path.iterdir()] == (["locked"] if where.parent == tmp_path
+                                                    else [])

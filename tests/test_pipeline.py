@@ -996,7 +996,7 @@ def test_a_store_that_cannot_be_written_fails_before_the_ingest(bunny, tmp_path,
                        (tmp_path / "made" / "t", tmp_path / "made")):
         with caplog.at_level("INFO", logger="tiledsimplify"), pytest.raises(
                 InputError, match=rf"{where.name}: the tile store's directory {bad} is not "
-                                  r"writable; give --store a directory you can write to"):
+                                  r"writable \(permission denied\); give --store a directory you can write to"):
             run(path, tmp_path / "o.npy", ratio=0.2, store=where, tile_points=3000)
         assert "ingest" not in caplog.text and not (tmp_path / "o.npy").exists()
     with pytest.raises(InputError, match=r"bunny.npy: is a file, not a tile store directory"):
@@ -1036,14 +1036,27 @@ def test_a_store_in_use_is_refused_however_its_path_is_spelled(bunny, tmp_path):
 
 
 @pytest.mark.skipif(not __import__("sys").platform.startswith("linux"), reason="prctl")
-def test_a_killed_run_leaves_no_worker_processes(tmp_path):
+@pytest.mark.parametrize("slow_start", [False, True])
+def test_a_killed_run_leaves_no_worker_processes(tmp_path, slow_start):
     # SIGKILL (the OOM killer, a batch system past its grace period) gives no stage a chance
     # to end its pool: its processes lived on as orphans, ran every queued tile into the store
-    # and then idled; now they end with the run
+    # and then idled; now they end with the run. slow_start: the pool's processes reach their
+    # initializer only after the run was killed (imports on a slow file system: this test
+    # failed 3 times in 6 from a worktree on /work, never from /tmp) -- they lived on too
     import os
     import subprocess
     import sys
     import time
+    env = dict(os.environ)
+    if slow_start:
+        site = tmp_path / "site"
+        site.mkdir()
+        (site / "sitecustomize.py").write_text(
+            "import sys, time\n"
+            "if '--multiprocessing-fork' in sys.argv:\n"
+            "    time.sleep(4)\n")
+        env["PYTHONPATH"] = os.pathsep.join(
+            [str(site), *filter(None, [os.environ.get("PYTHONPATH")])])
     script = tmp_path / "killed.py"
     script.write_text(
         "import importlib, os, signal, time\n"
@@ -1056,7 +1069,7 @@ def test_a_killed_run_leaves_no_worker_processes(tmp_path):
         "        os.kill(os.getpid(), signal.SIGKILL)\n")
     with open(tmp_path / "pids", "w") as out:  # a file: survivors would hold a pipe open
         got = subprocess.run([sys.executable, str(script)], stdout=out, timeout=120,
-                             check=False)
+                             check=False, env=env)
     assert got.returncode == -9
     pids = [int(p) for p in (tmp_path / "pids").read_text().split()]
     assert len(pids) == 2

@@ -127,8 +127,35 @@ def _count(text):
     return int(value)
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, whose usage errors (exit 2) keep their message for ``--summary``."""
+
+    def error(self, message):
+        try:
+            super().error(message)
+        except SystemExit as exc:
+            exc.usage_error = f"{self.prog}: error: {message}"
+            raise
+
+
+def _usage_summary(argv, message):
+    """A ``run`` refused by argparse itself (``--ratio 0``, an unknown flag) still writes the
+    ``--summary`` it was given, as every other failure does: the file left from an earlier run
+    said exit code 0 to a pipeline reading it."""
+    q = argparse.ArgumentParser(add_help=False)
+    q.add_argument("command", nargs="?")
+    q.add_argument("--summary")
+    try:
+        known, _ = q.parse_known_args(argv)
+    except SystemExit:  # e.g. --summary without its value: no file to write
+        return
+    if known.command == "run" and known.summary:
+        _failed_summary(argparse.Namespace(input=None, output=None, summary=known.summary),
+                        EXIT_INPUT, message)
+
+
 def _parser():
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="tiledsimplify",
         description="Feature-preserving simplification of 3-D point clouds (Song & Feng).")
     p.add_argument("--version", action="version", version=f"tiledsimplify {__version__}")
@@ -506,7 +533,12 @@ def _stopped_message(args, signum, seconds):
 
 
 def main(argv=None):
-    args = _parser().parse_args(argv)
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exc:
+        if getattr(exc, "usage_error", None):
+            _usage_summary(sys.argv[1:] if argv is None else argv, exc.usage_error)
+        raise
     logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
                         format="%(asctime)s %(levelname)s %(message)s", stream=sys.stderr)
     # laspy logs a read error before raising it; the error we report quotes it with the file
@@ -554,7 +586,8 @@ def _failed_summary(args, code, message):
     """``--summary`` of a run that failed or was stopped: what was asked, the exit code and
     the message, so a pipeline reading the file learns as much as from the log."""
     try:
-        write_json(args.summary, {"input": str(args.input), "output": str(args.output),
+        write_json(args.summary, {"input": None if args.input is None else str(args.input),
+                                  "output": None if args.output is None else str(args.output),
                                   "version": __version__, "exit_code": code, "error": message})
     except OSError as exc:  # the summary's own path may be what failed
         log.error("could not write the run summary to %s (%s)", args.summary, exc)

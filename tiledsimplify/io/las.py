@@ -444,6 +444,41 @@ def part_ranges(count, max_points, chunk_points):
     return list(itertools.pairwise([*range(0, count, max(step, 1)), count]))
 
 
+def _header_box(header: laspy.LasHeader):
+    """``(lo, hi)`` a file's points must lie in, or None where its header's bounds cannot
+    be trusted (unset: all zero, or inverted). The header's box grown on every side by its
+    diagonal, and by at least 1000 steps of the file's grid: a stale header (points moved or
+    cropped without rewriting it) still reads, while a damaged LAZ chunk, which lazrs may
+    decode to arbitrary coordinates without an error, does not."""
+    mins = np.asarray(header.mins, dtype=np.float64)
+    maxs = np.asarray(header.maxs, dtype=np.float64)
+    if not (np.all(np.isfinite(mins)) and np.all(np.isfinite(maxs))) or np.any(maxs < mins) \
+            or (not mins.any() and not maxs.any()):
+        return None
+    margin = max(float(np.linalg.norm(maxs - mins)),
+                 1000 * float(np.max(np.abs(np.asarray(header.scales, dtype=np.float64)))))
+    return mins - margin, maxs + margin
+
+
+def _check_in_box(path, xyz, box, first):
+    """Refuse a chunk (points ``first``… of ``path``) with points far outside the header's
+    bounding box (:func:`_header_box`)."""
+    if not len(xyz):
+        return
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    if np.all(lo >= box[0]) and np.all(hi <= box[1]):
+        return
+    out = np.any((xyz < box[0]) | (xyz > box[1]), axis=1)
+    where = int(np.flatnonzero(out)[0])
+    raise FileFormatError(
+        f"{path}: {int(out.sum()):,} of its points {first:,} to {first + len(xyz) - 1:,} lie far "
+        f"outside the bounding box its header gives (point {first + where} at "
+        f"{', '.join(f'{v:.6g}' for v in xyz[where])}): the file is most likely corrupt (a "
+        "damaged LAZ chunk decodes to wrong points without an error). Copy or export it "
+        "again and check it with `lasinfo` / `pdal info`; if only its header's bounds are "
+        "wrong, rewrite them (e.g. `lasinfo -repair_bb`).")
+
+
 class LasPart:
     """Points ``lo`` to ``hi - 1`` of one file of a :class:`LasSource`, read as its chunks
     (global start indices, the source's attribute names) — :meth:`LasSource.parts`. Holds
@@ -473,6 +508,7 @@ class LasPart:
                 raise FileFormatError(f"{path}: changed since it was opened; open it again.")
             scales = np.asarray(header.scales, dtype=np.float64)
             offsets = np.asarray(header.offsets, dtype=np.float64)
+            box = _header_box(header)
             done = self.lo
             if done:
                 try:
@@ -494,6 +530,8 @@ class LasPart:
                 for axis, dim in enumerate(_XYZ):
                     np.multiply(rec[dim], scales[axis], out=xyz[:, axis])
                     xyz[:, axis] += offsets[axis]
+                if box is not None:
+                    _check_in_box(path, xyz, box, done)
                 attrs = {name: np.array(rec[name]) for name in self.names}
                 del rec
                 yield self.first + done, xyz, attrs
@@ -535,15 +573,22 @@ class LasSource:
         self.chunk_points = int(chunk_points)
         self.files = las_files(spec)
         self.infos = [_read_info(p) for p in self.files]
-        crs = {i.crs for i in self.infos if i.crs is not None}
+        # files with CRS records and files without count as different too: a LAS/LAZ
+        # output takes the first file's records, so a first file without them left the
+        # output without a CRS, silently
+        crs = {i.crs for i in self.infos}
         if len(crs) > 1:
             warnings.warn("LAS/LAZ files with different CRS descriptions are read as one cloud, "
                           "their coordinates as they are (not reprojected; a LAS/LAZ output "
-                          "takes the first file's CRS): "
-                          + "; ".join(f"{i.path.name}: {_short(i.crs)}" for i in self.infos)
+                          "takes the first file's CRS"
+                          + (", here none" if self.infos[0].crs is None else "") + "): "
+                          + "; ".join(f"{i.path.name}: {_short(i.crs) or 'no CRS records'}"
+                                      for i in self.infos)
                           + ". Reproject them to one CRS first if they differ in more than "
                           "how it is written (e.g. `pdal translate in.laz out.laz reprojection "
-                          "--filters.reprojection.out_srs=EPSG:XXXX`).",
+                          "--filters.reprojection.out_srs=EPSG:XXXX`), or assign it to "
+                          "the files without one (`pdal translate a.laz b.laz "
+                          "--writers.las.a_srs=EPSG:XXXX`).",
                           UserWarning, stacklevel=2)
         first = self.infos[0]
         common = []

@@ -41,6 +41,7 @@ from ..io import points_out
 from ..io.las import LAS_SUFFIXES
 from ..io.points_out import (
     PointsAt,
+    cannot_write_in,
     check_not_input,
     check_output,
     check_space,
@@ -439,9 +440,13 @@ def _check_store_writable(store_path):
             raise InputError(f"{store_path}: is a file, not a tile store directory; give "
                              f"--store {STORE_FIX}.")
         return  # a file on the way: the lock's mkdir names it
-    if where is not None and not os.access(where, os.W_OK | os.X_OK):
-        raise InputError(f"{store_path}: the tile store's directory {where} is not writable; "
-                         "give --store a directory you can write to.")
+    if where is None:
+        return
+    why = None if os.access(where, os.W_OK | os.X_OK) else "permission denied"
+    why = why or cannot_write_in(where)
+    if why:
+        raise InputError(f"{store_path}: the tile store's directory {where} is not writable "
+                         f"({why}); give --store a directory you can write to.")
 
 
 #: seconds beyond dask's connect timeout (``distributed.comm.timeouts.connect``) that a run
@@ -553,11 +558,18 @@ def _check_scheduler(scheduler):
                          f"got {scheduler!r}.")
 
 
-def _pool_process():
+def _pool_process(run_pid=None):
     """Initializer of a :func:`_process_pool` process: dask's, and on Linux the process ends
     with its parent (``PR_SET_PDEATHSIG``). A run killed outright (SIGKILL: the OOM killer, a
     batch system past its grace period) left its pool's processes behind, orphaned: they ran
-    every queued tile on, writing into the store no run held, and then idled on."""
+    every queued tile on, writing into the store no run held, and then idled on.
+
+    ``run_pid``: the run's process, which started this one (spawn, fork; None for a
+    forkserver's). A run killed while its pool's processes still started (importing the
+    package, seconds on a slow file system) left them orphaned before this ran, and the
+    parent then seen was the orphans' reaper."""
+    if run_pid is not None and os.getppid() != run_pid:
+        os._exit(1)  # the run died before this process got here
     from dask.multiprocessing import initialize_worker_process
     initialize_worker_process()
     if sys.platform.startswith("linux"):
@@ -585,8 +597,11 @@ def _process_pool(workers):
     from dask.multiprocessing import get_context
     if os.environ.get("PYTHONHASHSEED") in (None, "0"):
         os.environ["PYTHONHASHSEED"] = "6640"  # as dask sets it for the pools it makes
-    pool = ProcessPoolExecutor(workers or machine.cpus(), mp_context=get_context(),
-                               initializer=_pool_process)
+    context = get_context()
+    pool = ProcessPoolExecutor(workers or machine.cpus(), mp_context=context,
+                               initializer=_pool_process, initargs=(
+                                   os.getpid() if context.get_start_method() in ("spawn", "fork")
+                                   else None,))
     try:
         yield pool
     except BaseException:
@@ -846,6 +861,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     _warn_read_back(input, output, source)
     _warn_leftovers(output)
     _check_layout(output, source)
+    _warn_regrid(output, source)
     _check_room(output, target * _record_bytes(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
     if workers is not None and workers < 1:
@@ -1157,6 +1173,33 @@ def _warn_leftovers(output):
                     "it take %.1f MB beside it (%s); delete them unless another run is writing "
                     "%s now.", output, len(left), size / 1e6, ", ".join(p.name for p in left),
                     output.name)
+
+
+def _warn_regrid(output, source):
+    """Warn when a LAS/LAZ output moves points of input files on another grid than the
+    first file's, which it takes (:func:`regrids`): a file of finer scales, or offsets off
+    the first file's steps, has its kept points rounded to that grid — up to half a step on
+    each axis — where a folder merging two deliveries lost their precision silently."""
+    if output.suffix.lower() not in LAS_SUFFIXES or not source.is_las:
+        return
+    steps, origin = source.scales, source.offsets
+    moved = []
+    for info in source.infos[1:]:
+        ratio = np.asarray(info.scales, dtype=np.float64) / steps
+        shift = (np.asarray(info.offsets, dtype=np.float64) - origin) / steps
+        if not (np.allclose(ratio, np.round(ratio), rtol=0, atol=1e-6) and np.all(ratio >= 1)
+                and np.allclose(shift, np.round(shift), rtol=0, atol=1e-6)):
+            moved.append(info)
+    if moved:
+        log.warning(
+            "%s: %d input file(s) are on another grid than the first file's (%s: scales %s, "
+            "offsets %s), which the output takes: their kept points move by up to half a step "
+            "on each axis (%s: scales %s, offsets %s%s). Give the files one scale and offset "
+            "first (e.g. `pdal translate in.laz out.laz --writers.las.scale_x=… "
+            "--writers.las.offset_x=…`).", output, len(moved), source.infos[0].path.name,
+            steps.tolist(), origin.tolist(), moved[0].path.name,
+            np.asarray(moved[0].scales).tolist(), np.asarray(moved[0].offsets).tolist(),
+            "" if len(moved) == 1 else f"; and {len(moved) - 1} more")
 
 
 def _check_layout(output, source):
