@@ -489,6 +489,7 @@ def test_evaluate_and_simplify_read_las_as_run_does(data_dir, tmp_path, capsys):
         assert main(["evaluate", str(original), str(result), "--json"]) == EXIT_OK
         got.append(json.loads(capsys.readouterr().out))
     assert got[0] == got[1] and got[0]["n_kept"] == 6000 and got[0]["n_original"] == 20000
+    assert type(got[0]["n_kept"]) is int and type(got[0]["n_original"]) is int  # not 6000.0
 
 
 def test_a_folder_without_las_files_says_what_it_holds(tmp_path, caplog):

@@ -362,7 +362,7 @@ def _evaluate(args):
         kw.update(spacing=s, edge_samples=synthetic.sample_edges(V, F, s))
     result = metrics.evaluate(original, kept, **kw)
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(json.dumps(metrics.as_json(result), indent=2))
     else:
         for key, value in result.items():
             print(f"{key:22s} {value:.6g}")

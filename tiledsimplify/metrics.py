@@ -1036,6 +1036,16 @@ def _ratio(k_f: int, n_f: int, k_r: int, n_r: int) -> float:
 EVALUATE_BYTES_PER_POINT = 400
 
 
+#: the keys of :func:`evaluate` that count points (floats in its dict, like every value)
+COUNT_KEYS = ("n_original", "n_kept")
+
+
+def as_json(result):
+    """:func:`evaluate`'s dict for a JSON file: the counts as integers (``110000``, not
+    ``110000.0``, which JSON readers take for a float), every other value as it is."""
+    return {k: int(v) if k in COUNT_KEYS else v for k, v in result.items()}
+
+
 def evaluate(
     original: Any,
     kept: Any,

@@ -397,7 +397,7 @@ def make_report(input_path, result_path, out_dir, *, mesh=None, spacing=None, up
     rep.files = draw_figures(out, original, kept_xyz, boundary, kept_boundary,
                              up=up or ("z" if is_las else "y"), elev=elev, azim=azim,
                              max_plot_points=max_plot_points, titles=titles, dpi=dpi)
-    (out / "metrics.json").write_text(json.dumps(m, indent=2) + "\n")
+    (out / "metrics.json").write_text(json.dumps(metrics.as_json(m), indent=2) + "\n")
     rep.files["metrics"] = out / "metrics.json"
     md = _markdown(input_path, result_path, rep, {k: v for k, v in rep.files.items()}, mesh)
     (out / "report.md").write_text(md)
