@@ -201,8 +201,9 @@ def test_a_spacing_in_the_wrong_units_warns(data_dir):
 @pytest.mark.parametrize("mode", ["coverage", "paper"])
 def test_a_far_outlier_costs_the_others_no_neighbours(data_dir, mode):
     """One point far from the Bunny (a garbage point at the origin of a georeferenced cloud,
-    say) made every Voronoi facet of the Bunny "degenerate" (thinner than 1e-8 of the
-    diagonal), and at 1e9 away its triangulation lost most edges: mean degree 0 at 1e6, no
+    say; the Bunny is 0.25 m across) made every Voronoi facet of the Bunny "degenerate"
+    (thinner than 1e-8 of the diagonal), and 1e9 m away its triangulation lost most edges:
+    mean degree 0 at 1e6 m, no
     edge flags, an arbitrary removal order — silently. The facet tolerance is now at most
     SCALE_SPACINGS spacings and a point alone beyond twice the reach is left out of the
     triangulation: the Bunny keeps its neighbours and flags. Two parts that far apart still

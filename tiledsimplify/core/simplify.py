@@ -150,6 +150,14 @@ def _spacing(Xu, options):
     return options.spacing if options.spacing is not None else median_spacing(Xu)
 
 
+def _working_spacing(Xu, options):
+    """:func:`_spacing` where the options use one (the coverage measure, a finite reach),
+    else None (mode "paper": unbounded neighbourhoods, Eq. (1) alone)."""
+    if options.importance == "coverage" or math.isfinite(options.reach_spacings):
+        return _spacing(Xu, options)
+    return None
+
+
 def reach_length(Xu, options, spacing=None):
     """``VN_p``'s reach in model units: ``options.reach_spacings`` x the spacing (or ``inf``)."""
     factor = options.reach_spacings
@@ -276,9 +284,7 @@ def neighbourhood_state(xyz, frozen=None, options=None):
     options = _options(options)
     X, frozen = _validate(xyz, frozen)
     _, inverse, Xu, D = _prepare(X, frozen)
-    spacing = None
-    if options.importance == "coverage" or math.isfinite(options.reach_spacings):
-        spacing = _spacing(Xu, options)
+    spacing = _working_spacing(Xu, options)
     st = neighbourhoods(Xu, _scale(Xu, D, spacing), reach_length(Xu, options, spacing))
     deviation_u = np.zeros(Xu.shape[0])
     boundary_mod.all_deviations(Xu, st.normals, st.dn, st.dn_cnt, deviation_u)
@@ -287,9 +293,10 @@ def neighbourhood_state(xyz, frozen=None, options=None):
 
 #: the extent of a cloud, in point spacings, past which the triangulation's floating point
 #: can lose neighbours. Facet tolerances are capped at ``voronoi.SCALE_SPACINGS`` spacings and
-#: a lone far outlier is left out of the triangulation (the Bunny with a point 1e9 of its size
-#: away: mean Voronoi degree 12.18 against 12.20 alone), but two parts that far apart each
-#: keep almost none (two Bunnies 1e9 apart: 0.83; 1e6 apart: 12.88, as one)
+#: a lone far outlier is left out of the triangulation (the Bunny, 0.25 m across at a 1 mm
+#: spacing, with a point 1e9 m away: mean Voronoi degree 12.18 against 12.20 alone), but two
+#: parts that far apart each keep almost none (two quarter-Bunnies 1e9 m apart: 0.83; 1e6 m
+#: apart: 12.88, as one)
 EXTENT_SPACINGS = 0.01 / TOL_FACTOR
 #: ... and the share of points left without a Voronoi neighbour above which that is said
 LOST_SHARE = 0.01
@@ -304,8 +311,6 @@ def _warn_lost_neighbours(Xu, D, options, spacing, degree, lonely):
     m = Xu.shape[0]
     if m < 10:
         return
-    s = (spacing if spacing is not None else options.spacing if options.spacing is not None
-         else median_spacing(Xu))  # measured only in mode "paper" without a spacing
     if options.spacing is not None and degree < 1:
         s = median_spacing(Xu)
         if options.spacing < 0.1 * s:
@@ -317,7 +322,10 @@ def _warn_lost_neighbours(Xu, D, options, spacing, degree, lonely):
                           "the points' units, or leave it out (None) to measure it.",
                           UserWarning, stacklevel=3)
             return
-    if s > 0 and D > EXTENT_SPACINGS * s and lonely > LOST_SHARE:
+    if not lonely > LOST_SHARE:
+        return
+    s = spacing if spacing is not None else median_spacing(Xu)  # ("paper": not measured yet)
+    if s > 0 and D > EXTENT_SPACINGS * s:
         warnings.warn(f"the points span {D:.6g} (bounding-box diagonal), {D / s:.3g} times "
                       f"their spacing ({s:.6g}), and {lonely:.0%} of them were left without "
                       f"a Voronoi neighbour (mean Voronoi degree {degree:.3g}; a surface has "
@@ -416,9 +424,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     stats["n_duplicates"] = n - m
     lap("prepare")
 
-    spacing = None
-    if options.importance == "coverage" or math.isfinite(options.reach_spacings):
-        spacing = _spacing(Xu, options)
+    spacing = _working_spacing(Xu, options)
     reach = reach_length(Xu, options, spacing)
     diagonal, D = D, _scale(Xu, D, spacing)
     if state is None:

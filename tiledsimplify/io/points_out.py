@@ -99,18 +99,19 @@ def check_writable(path):
     if not directory.is_dir():
         raise InputError(f"{path}: the output directory {directory} does not exist; create it "
                          "or write somewhere else.")
-    why = None if os.access(directory, os.W_OK | os.X_OK) else "permission denied"
-    why = why or cannot_write_in(directory)
+    why = cannot_write_in(directory)
     if why:
         raise InputError(f"{path}: the output directory {directory} is not writable ({why}); "
                          "choose a directory you can write to.")
 
 
 def cannot_write_in(directory):
-    """Why no file can be made in ``directory`` (the OS's words), or None: a file is made
-    and removed there. ``os.access`` alone says yes to root (a container's usual user) where
-    the write then fails — a read-only or SELinux-labelled bind mount, an immutable
-    directory, /proc — and the run failed only at its end, exit 1."""
+    """Why no file can be made in ``directory`` (the OS's words), or None: its permissions
+    are asked, then a file is made and removed there. ``os.access`` alone says yes to root (a
+    container's usual user) where the write then fails — a read-only or SELinux-labelled bind
+    mount, an immutable directory, /proc — and the run failed only at its end, exit 1."""
+    if not os.access(directory, os.W_OK | os.X_OK):
+        return "permission denied"
     try:
         fd, probe = tempfile.mkstemp(dir=directory, prefix=".tiledsimplify.", suffix=".probe")
     except OSError as exc:

@@ -440,10 +440,7 @@ def _check_store_writable(store_path):
             raise InputError(f"{store_path}: is a file, not a tile store directory; give "
                              f"--store {STORE_FIX}.")
         return  # a file on the way: the lock's mkdir names it
-    if where is None:
-        return
-    why = None if os.access(where, os.W_OK | os.X_OK) else "permission denied"
-    why = why or cannot_write_in(where)
+    why = None if where is None else cannot_write_in(where)
     if why:
         raise InputError(f"{store_path}: the tile store's directory {where} is not writable "
                          f"({why}); give --store a directory you can write to.")
@@ -1183,13 +1180,7 @@ def _warn_regrid(output, source):
     if output.suffix.lower() not in LAS_SUFFIXES or not source.is_las:
         return
     steps, origin = source.scales, source.offsets
-    moved = []
-    for info in source.infos[1:]:
-        ratio = np.asarray(info.scales, dtype=np.float64) / steps
-        shift = (np.asarray(info.offsets, dtype=np.float64) - origin) / steps
-        if not (np.allclose(ratio, np.round(ratio), rtol=0, atol=1e-6) and np.all(ratio >= 1)
-                and np.allclose(shift, np.round(shift), rtol=0, atol=1e-6)):
-            moved.append(info)
+    moved = _off_grid_files(source)
     if moved:
         log.warning(
             "%s: %d input file(s) are on another grid than the first file's (%s: scales %s, "
@@ -1223,10 +1214,28 @@ def _check_grid(output, source, ts):
             raise off_grid(output, lo, hi, source.scales, source.offsets)
 
 
+def _off_grid_files(source):
+    """The files of a LAS ``source`` whose points the first file's grid (the output's) moves
+    by up to half a step: finer scales, or offsets off its steps (a coarser multiple at whole
+    steps moves them by rounding only)."""
+    steps, origin = source.scales, source.offsets
+    moved = []
+    for info in source.infos[1:]:
+        ratio = np.asarray(info.scales, dtype=np.float64) / steps
+        shift = (np.asarray(info.offsets, dtype=np.float64) - origin) / steps
+        if not (np.allclose(ratio, np.round(ratio), rtol=0, atol=1e-6) and np.all(ratio >= 1)
+                and np.allclose(shift, np.round(shift), rtol=0, atol=1e-6)):
+            moved.append(info)
+    return moved
+
+
 def regrids(output, source):
     """Whether the output puts the kept points on a grid they were not read from: a LAS/LAZ
     output of a non-LAS input, or of LAS files on other scales or offsets than the first's
-    (whose grid the output takes); a LAS input's records are otherwise kept as read."""
+    (whose grid the output takes); a LAS input's records are otherwise kept as read. Stricter
+    than :func:`_off_grid_files` (which warns of visible moves): a file on a coarser multiple
+    of the grid is re-quantised too, and its points move by rounding — what the guard's bound
+    (:func:`guard_limit`) must allow for."""
     if output.suffix.lower() not in LAS_SUFFIXES:
         return False
     return not source.is_las or not all(

@@ -129,9 +129,10 @@ def refine_width(halo, hausdorff):
 
 
 #: a tile refines in a view at most this many halos wide (:func:`refine_width`): at 10 halos
-#: (100 spacings by default) a tile of 100,000 points on a surface (the least default tile,
-#: ~316 spacings across) reads ~2.7x its core, one of 500,000 ~1.7x. The cut's gap at 1 %
-#: kept: 22-43 spacings on the inputs of docs/measurements.md ("Small ratios")
+#: (100 spacings by default) a square tile of 100,000 points on a surface (the least default
+#: tile, ~316 spacings across) would read ~2.7x its core, one of 500,000 ~1.7x (geometry, not
+#: measured). The cut's gap at 1 % kept: 22-43 spacings on the inputs of docs/measurements.md
+#: ("Small ratios")
 MAX_WIDTH = 10.0
 
 
