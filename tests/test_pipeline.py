@@ -1264,3 +1264,28 @@ def test_a_store_for_other_settings_is_refused_naming_what_differs(bunny, tmp_pa
     os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))  # the input, touched
     with pytest.raises(InputError, match=r"\(the same settings, but the input files differ"):
         run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, store=store, progress=False)
+
+
+def test_unbounded_options_are_saved_in_the_store_by_name(tmp_path, caplog):
+    """``reach = inf`` (the paper's unbounded neighbourhoods) is a valid option, but a tiled
+    run failed with it before any work: the store keeps its settings as JSON, which has no
+    infinity ("config must be JSON-serialisable"). Now it is saved by name, and a resumed run
+    with the same options finds its store."""
+    from tiledsimplify import SimplifyOptions
+    rng = np.random.default_rng(1)
+    path = tmp_path / "plate.npy"
+    np.save(path, np.c_[rng.random((3000, 2)), 0.01 * rng.random(3000)])
+    options = SimplifyOptions(reach=float("inf"))
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        s = run(path, tmp_path / "a.npy", ratio=0.3, options=options, store=tmp_path / "st",
+                tile_points=1000, progress=False)
+    assert s.reached and s.n_output == 900
+    assert [r for r in caplog.records if r.getMessage().startswith("tile ")]
+    saved = TileStore.open(tmp_path / "st").config["options"]
+    assert saved["reach"] == "inf"
+    caplog.clear()
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        run(path, tmp_path / "b.npy", ratio=0.3, options=options, store=tmp_path / "st",
+            tile_points=1000, progress=False)
+    assert not [r for r in caplog.records if r.getMessage().startswith("tile ")]  # resumed
+    assert np.array_equal(np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy"))

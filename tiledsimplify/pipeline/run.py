@@ -876,7 +876,10 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                     f"{default_tile_points(n):,}")
     workers = local_workers(scheduler, workers, client, int(tile_points))
     opts = asdict(options)
-    settings = {"tile_points": int(tile_points), "halo": halo, "options": opts,
+    # as the store keeps them (JSON): an unbounded option (reach, edge_share = inf) by name
+    saved = {k: repr(v) if isinstance(v, float) and not math.isfinite(v) else v
+             for k, v in opts.items()}
+    settings = {"tile_points": int(tile_points), "halo": halo, "options": saved,
                 "version": __version__}
     if options.prethin_factor:  # the tiles' sequences then depend on the target: a resumed
         settings["target"] = int(target)  # run must ask for the same, thinned the same way
