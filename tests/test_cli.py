@@ -533,6 +533,33 @@ def test_edge_angle_reaches_both_commands(tmp_path, caplog):
         assert not out.exists()
 
 
+def test_edge_share_reaches_both_commands(tmp_path, caplog):
+    """``--edge-share``: on a roof whose ridge flags more points than a 0.5 % count, the default
+    keeps the count (exit 0) with some flagged points; ``inf`` keeps every flagged point and
+    misses it (exit 3); a share outside (0, 1] fails before any work, naming the option."""
+    rng = np.random.default_rng(6)
+    xy = rng.random((8000, 2)) * 2 - 1
+    X = np.c_[xy, -np.abs(xy[:, 0])]  # folds by 90° along x = 0
+    path = tmp_path / "roof.npy"
+    np.save(path, X)
+    for command in ("simplify", "run"):
+        got = {}
+        for share, code in ((None, EXIT_OK), ("inf", EXIT_BUDGET)):
+            out = tmp_path / f"{command}_{share}.npy"
+            extra = [] if share is None else ["--edge-share", share]
+            assert main([command, str(path), str(out), "--ratio", "0.005", "-q", *extra]) \
+                == code, (command, share)
+            got[share] = np.load(out)
+        assert len(got[None]) == 40 and 0 < got[None]["sharp_edge"].sum() <= 16, command
+        assert len(got["inf"]) == got["inf"]["sharp_edge"].sum() > 40, command
+        out = tmp_path / f"{command}_bad.npy"
+        with caplog.at_level("ERROR", logger="tiledsimplify"):
+            assert main([command, str(path), str(out), "--ratio", "0.005", "-q",
+                         "--edge-share", "2"]) == EXIT_INPUT
+        assert "options.edge_share must be a share of the count" in caplog.text
+        assert not out.exists()
+
+
 def test_max_spacing_reaches_both_commands(cloud, tmp_path, caplog, capsys):
     """``--max-spacing D``: no input point is left farther than D from a kept one, by simplify
     and by run (more than the count is kept: exit 3, with the flag in the advice); alone, the

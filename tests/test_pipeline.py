@@ -396,11 +396,17 @@ def test_a_short_run_says_why_as_the_core_does(bunny, tmp_path):
                          f"boundary; {s.n_output} vetoed by the max_spacing guard): kept "
                          f"{s.n_output}. Raise the target, or raise options.max_spacing.")
     X, path = bunny
-    s = run(path, tmp_path / "b.npy", count=10, tile_points=3000)
+    s = run(path, tmp_path / "b.npy", count=10, tile_points=3000,
+            options=SimplifyOptions(edge_share=float("inf")))  # every flagged point kept
     assert not s.reached and s.n_output == s.n_boundary > 10
     assert s.message == (f"asked to keep 10 of {len(X)} points, but {s.n_output} must be kept "
                          f"({s.n_output} boundary): kept {s.n_output}. Raise the target, or "
-                         "raise options.boundary_threshold to flag fewer boundary points.")
+                         "give options.edge_share a share of the count (such as 0.5) to keep "
+                         "only that many boundary points for certain, or raise "
+                         "options.boundary_threshold to flag fewer.")
+    # by default the flagged points are sure of 0.4 of the count at most: it is reached
+    s = run(path, tmp_path / "c.npy", count=10, tile_points=3000)
+    assert s.reached and s.n_output == 10 and s.message == ""
 
 
 @pytest.fixture(scope="module")
@@ -1267,22 +1273,23 @@ def test_a_store_for_other_settings_is_refused_naming_what_differs(bunny, tmp_pa
 
 
 def test_unbounded_options_are_saved_in_the_store_by_name(tmp_path, caplog):
-    """``reach = inf`` (the paper's unbounded neighbourhoods) is a valid option, but a tiled
-    run failed with it before any work: the store keeps its settings as JSON, which has no
-    infinity ("config must be JSON-serialisable"). Now it is saved by name, and a resumed run
-    with the same options finds its store."""
+    """``reach = inf`` (the paper's unbounded neighbourhoods) and ``edge_share = inf`` (every
+    flagged point kept) are valid options, but a tiled run failed with them before any work:
+    the store keeps its settings as JSON, which has no infinity ("config must be
+    JSON-serialisable"). Now they are saved by name, and a resumed run with the same options
+    finds its store."""
     from tiledsimplify import SimplifyOptions
     rng = np.random.default_rng(1)
     path = tmp_path / "plate.npy"
     np.save(path, np.c_[rng.random((3000, 2)), 0.01 * rng.random(3000)])
-    options = SimplifyOptions(reach=float("inf"))
+    options = SimplifyOptions(reach=float("inf"), edge_share=float("inf"))
     with caplog.at_level("INFO", logger="tiledsimplify"):
         s = run(path, tmp_path / "a.npy", ratio=0.3, options=options, store=tmp_path / "st",
                 tile_points=1000, progress=False)
     assert s.reached and s.n_output == 900
     assert [r for r in caplog.records if r.getMessage().startswith("tile ")]
     saved = TileStore.open(tmp_path / "st").config["options"]
-    assert saved["reach"] == "inf"
+    assert saved["reach"] == saved["edge_share"] == "inf"
     caplog.clear()
     with caplog.at_level("INFO", logger="tiledsimplify"):
         run(path, tmp_path / "b.npy", ratio=0.3, options=options, store=tmp_path / "st",

@@ -23,7 +23,7 @@ import numpy as np
 from . import __version__, machine
 from .core import SimplifyOptions, compile_cache, simplify_points
 from .core.edge_fit import CANDIDATE, MIN_ANGLE
-from .core.options import MODES
+from .core.options import EDGE_SHARE, MODES
 from .core.simplify import PEAK_BYTES_PER_POINT
 from .errors import BudgetWarning, FileFormatError, InputError, TiledSimplifyError
 from .io.las import LAS_SUFFIXES
@@ -48,6 +48,11 @@ STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 EDGE_ANGLE_HELP = ("mode coverage: the least fold of a sharp edge in degrees, above 0 and at "
                    f"most 90 (default {MIN_ANGLE:g}); lower flags shallower chamfers and bevels "
                    "too")
+EDGE_SHARE_HELP = ("mode coverage: the most of the count that sharp-edge points are sure of, "
+                   f"in (0, 1] (default {EDGE_SHARE:g}): where more are flagged, an even "
+                   "sample along the edges of that many is kept for certain and the rest "
+                   "compete with the other points (still flagged); inf keeps every flagged "
+                   "point whatever the count")
 MAX_SPACING_HELP = ("leave no input point farther than DISTANCE (model units) from a kept "
                     "point: removals that would are vetoed, so more than the count may be kept "
                     "(exit 3); alone (no --ratio or --count), keep as few points as that "
@@ -180,6 +185,8 @@ def _parser():
     s.add_argument("--no-boundary", action="store_true", help="do not flag sharp-edge points")
     s.add_argument("--edge-angle", type=float, default=None, metavar="DEGREES",
                    help=EDGE_ANGLE_HELP)
+    s.add_argument("--edge-share", type=float, default=None, metavar="SHARE",
+                   help=EDGE_SHARE_HELP)
     s.add_argument("--max-spacing", type=_distance, default=None, metavar="DISTANCE",
                    help=MAX_SPACING_HELP)
     s.add_argument("--mode", choices=MODES, default=MODES[0],
@@ -222,6 +229,8 @@ def _parser():
                    help="coverage (default) or paper; overrides [simplify] mode")
     r.add_argument("--edge-angle", type=float, default=None, metavar="DEGREES",
                    help=EDGE_ANGLE_HELP + "; overrides [simplify] edge_angle")
+    r.add_argument("--edge-share", type=float, default=None, metavar="SHARE",
+                   help=EDGE_SHARE_HELP + "; overrides [simplify] edge_share")
     r.add_argument("--max-spacing", type=_distance, default=None, metavar="DISTANCE",
                    help=MAX_SPACING_HELP + "; overrides [simplify] guard and max_spacing")
     r.add_argument("--floor", type=float, default=None,
@@ -461,8 +470,11 @@ def check_memory(name, n, room=None, per_point=PEAK_BYTES_PER_POINT + 24, doing=
 
 
 def _option_flags(args):
-    """The core options both commands take as flags: ``--edge-angle``, ``--max-spacing``."""
+    """The core options both commands take as flags: ``--edge-angle``, ``--edge-share``,
+    ``--max-spacing``."""
     flags = {} if args.edge_angle is None else {"edge_angle": args.edge_angle}
+    if args.edge_share is not None:
+        flags["edge_share"] = args.edge_share
     if args.max_spacing is not None:
         flags.update(guard="max_spacing", max_spacing=args.max_spacing)
     return flags

@@ -38,6 +38,19 @@ REACH = 12.0
 #: every peer on one scan more; the Bunny 17.16 -> 17.12, Hausdorff 140.8 -> 139.7. 1.5: edge
 #: coverage another -0.6 %, mean error +0.2 %, 8 % faster
 PRETHIN = 2.0
+#: mode "coverage": default ``edge_share``, the most of the count flagged points are sure of.
+#: Measured 2026-12-05 on the 39 quality cases (``benchmarks/quality.py``, ours only, against
+#: no limit): at 0.5 four even CAD parts change (their flags are 0.50-0.88 of the count), mean
+#: surface error and Hausdorff lower on all four (octagonal_pocket 34.0 -> 21.9, below every
+#: peer's 23.7; Hausdorff 218 -> 125), edge coverage up on three; at 0.4 six change (Fandisk,
+#: block and angle_block too): Hausdorff within 1.2x the best peer's on all 12 even parts, not
+#: 6 (Fandisk 155 -> 144, best 125), mean error still the lowest on each (Fandisk 6.27 -> 6.59,
+#: best peer 13.3), edge coverage at most 0.027 lower (idler_riser 0.942 -> 0.915, best peer
+#: 0.905); at 0.35 the Bunny changes too (mean 17.13 -> 16.27) but idler_riser's edge coverage
+#: falls below CGAL hierarchy's and octagonal_pocket's below 0.95. At 5 % kept (7 cases with
+#: the peers) 0.4 keeps the lowest mean error on 6 (0.5: 5) and Hausdorff within 1.18x the
+#: best peer's on all 7 (0.5: 5). Scans, the Bunny range scans and Autzen: unchanged
+EDGE_SHARE = 0.4
 
 
 @dataclass(frozen=True)
@@ -151,6 +164,18 @@ class SimplifyOptions:
         nearest kept one (:func:`tiledsimplify.core.prethin.covered_by`). Counts
         above the subset's (:meth:`SimplifyResult.keep_at`) come from
         the sample, not the greedy.
+    edge_share : float or None
+        ``"coverage"``: the most of the requested count that flagged (sharp-edge) points are
+        sure of. Where more points are flagged, that many are kept for certain — an even
+        sample along the edges, the points nearest their fitted edge line first
+        (:func:`tiledsimplify.core.prethin.edge_sample`) — and the other flagged points stay
+        flagged but compete with the rest. At small targets the flags alone would otherwise
+        take the whole count and leave the faces empty (Fandisk at 5 %: 1,524 flags for a
+        count of 824, all kept: mean surface error 10x the best peer's). A value in (0, 1], or
+        ``inf``: every flagged point kept whatever the count (as until 2026-12-05; the count
+        may then be missed). None: the mode's default (``"coverage"``: :data:`EDGE_SHARE`,
+        0.4; ``"paper"``: ``inf``, as published). A tiled run applies it to each tile's share
+        of the count (as the pre-thinning does).
     """
 
     mode: str = "coverage"
@@ -171,6 +196,7 @@ class SimplifyOptions:
     refine: bool | None = None
     update_normals: bool | None = None
     prethin: float | None = None
+    edge_share: float | None = None
 
     def __post_init__(self):
         for f in fields(self):  # a config file can give any type: say which option is wrong
@@ -235,6 +261,11 @@ class SimplifyOptions:
                                              or 1 <= self.prethin < float("inf")):
             raise InputError("options.prethin must be 0 (off), a multiple of the target of at "
                              f"least 1, or None (the mode's default), got {self.prethin!r}.")
+        if self.edge_share is not None and not (0 < self.edge_share <= 1
+                                                or self.edge_share == float("inf")):
+            raise InputError("options.edge_share must be a share of the count in (0, 1], inf "
+                             "(every flagged point kept whatever the count) or None (the "
+                             f"mode's default), got {self.edge_share!r}.")
         if not self.boundary_k > 0:
             raise InputError(f"options.boundary_k must be positive, got {self.boundary_k!r}.")
         if not self.boundary_floor >= 0:
@@ -255,6 +286,13 @@ class SimplifyOptions:
         if self.prethin is not None:
             return float(self.prethin)
         return 0.0 if self.mode == "paper" else PRETHIN
+
+    @property
+    def edge_share_value(self):
+        """The share of the count flagged points are sure of: the option, else the mode's."""
+        if self.edge_share is not None:
+            return float(self.edge_share)
+        return float("inf") if self.mode == "paper" else EDGE_SHARE
 
     @property
     def refines(self):

@@ -163,6 +163,48 @@ def subset(X, start, cnt, pool, fixed, goal, spacing, tie, least=0, first=None,
     return mask
 
 
+def edge_sample(X, start, cnt, pool, flags, distance, tie, goal, spacing):
+    """At most about ``goal`` of the ``flags``: an even sample along the edges, each flagged
+    point taken, nearest its fitted edge line first (``distance``, ties by ``tie``), unless a
+    point taken lies within the radius along the graph (:func:`disk_sample` of the flagged
+    points alone). The radius is found as :func:`subset` finds its own, from the model of a
+    line (the count goes with ``1 / r``); of the samples tried, the largest at most ``goal``
+    wins (the smallest if none is). Returns the bool mask (all of ``flags`` if they are no
+    more than ``goal``; none if ``goal`` is 0).
+
+    Beyond the paper (the option ``edge_share``): flagged points are kept whatever the count,
+    so at small targets they alone would take it — the Fandisk at 5 %, 1,524 flags for a
+    count of 824 — and leave the faces empty.
+    """
+    n = X.shape[0]
+    ids = np.flatnonzero(flags)
+    if ids.size <= goal:
+        return flags.copy()
+    if goal <= 0 or not spacing > 0:
+        return np.zeros(n, dtype=bool)
+    order = ids[np.lexsort((tie[ids], distance[ids]))].astype(np.int64)
+    none = np.zeros(n, dtype=bool)
+    keep = np.zeros(n, dtype=bool)
+    stamp = np.empty(n, dtype=np.int64)
+    stack = np.empty(n, dtype=np.int64)
+    aim = (1.0 - 0.5 * TOLERANCE) * goal  # the middle of the band accepted
+    r = spacing * ids.size / aim  # a band of rows at the spacing, thinned along its line
+    best, last = None, None
+    for _ in range(MAX_STEPS):
+        k = disk_sample(X, start, cnt, pool, none, order, r, keep, stamp, stack)
+        if best is None or (k <= goal and (best[0] > goal or k > best[0])) or (
+                k > goal and best[0] > goal and k < best[0]):
+            best = (k, keep.copy())
+        if goal * (1.0 - TOLERANCE) <= k <= goal:
+            break
+        slope = -1.0  # d log(count) / d log(r) along a line
+        if last is not None and k > 0 and last[1] > 0 and last[1] != k:
+            slope = min(-0.5, max(-4.0, math.log(k / last[1]) / math.log(r / last[0])))
+        last = (r, k)
+        r *= (aim / k) ** (1.0 / slope) if k > 0 else 0.5
+    return best[1]
+
+
 def covered_by(X, keep, covers, limit):
     """For a ``max_spacing`` guard: the cover of every thinned point (``~keep``) that needs one
     (``covers``, bool or None for all) — its nearest kept point that may cover, within

@@ -89,7 +89,9 @@ def short_message(target, n, must, kept, boundary, vetoed, guard, frozen=None):
     if vetoed:
         why += f"; {vetoed} vetoed by the {guard} guard"
     # the advice for what kept the most first; none for a cause that kept nothing
-    flags = "raise options.boundary_threshold to flag fewer boundary points"
+    flags = ("give options.edge_share a share of the count (such as 0.5) to keep only that "
+             "many boundary points for certain, or raise options.boundary_threshold to flag "
+             "fewer")
     fixes = [(vetoed, "raise options.max_spacing"), (boundary or not vetoed, flags)]
     fixes = [fix for count, fix in sorted(fixes, key=lambda f: -f[0]) if count]
     return (f"asked to keep {target} of {n} points, but {must} must be kept ({why}): kept "

@@ -168,8 +168,12 @@ def reach_length(Xu, options, spacing=None):
     return factor * spacing if spacing > 0 else math.inf
 
 
-def boundary_flags(Xu, st, options):
+def boundary_flags(Xu, st, options, distance_out=None):
     """Paper step 3: ``(deviation, boundary flags, threshold)`` as the options' mode says.
+
+    ``distance_out`` (optional, length m): filled in mode ``"coverage"`` with each point's
+    distance to its fitted (or borrowed) edge line in local spacings (``inf``: none), what
+    :func:`.prethin.edge_sample` orders by; ``inf`` everywhere in mode ``"paper"``.
 
     ``"paper"``: the one-ring measure with the automatic threshold (§3.1). ``"coverage"``: the
     two-ring measure, candidates above the threshold, then only those within
@@ -179,6 +183,8 @@ def boundary_flags(Xu, st, options):
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
+    if distance_out is not None:
+        distance_out[:] = np.inf
     if options.mode == "paper":
         boundary_mod.all_deviations(Xu, st.normals, st.dn, st.dn_cnt, deviation)
         if not options.detect_boundary:
@@ -198,7 +204,8 @@ def boundary_flags(Xu, st, options):
     fitted, fitted_angle, line, local = np.empty(m), np.empty(m), np.empty((m, 6)), np.empty(m)
     edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, fitted,
                       fitted_angle, line, local, float(options.edge_angle))
-    distance, angle = np.empty(m), np.empty(m)
+    distance = np.empty(m) if distance_out is None else distance_out
+    angle = np.empty(m)
     edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, options.edge_width,
                     edge_fit.band(fitted, fitted_angle, options.edge_width), distance, angle)
     return deviation, edge_fit.band(distance, angle, options.edge_width), threshold
@@ -446,7 +453,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     _warn_lost_neighbours(Xu, diagonal, options, spacing, stats["mean_voronoi_degree"],
                           float((st.cnt == 0).mean()) if m else 0.0)
     lap("neighbours_normals")
-    deviation_u, boundary_u, threshold = boundary_flags(Xu, st, options)
+    edge_distance = np.empty(m)
+    deviation_u, boundary_u, threshold = boundary_flags(Xu, st, options, edge_distance)
     lap("boundary")
     code = MEASURES[options.importance]
     weight = 0.0
@@ -454,17 +462,32 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         weight = coverage_weight(spacing, options.coverage) if spacing > 0 else 0.0
         stats["spacing"] = float(spacing)
 
+    tie = coordinate_hash(X[rep])
+    # beyond the paper: the flagged points sure of being kept, at most ``edge_share`` of the
+    # count (of the tile's share of the global one in a tiled run, as every pass over it
+    # asks); the other flagged points stay flagged but compete with the rest
+    anchor_u = boundary_u
+    share = options.edge_share_value
+    if math.isfinite(share) and not by_guard and boundary_u.any():
+        goal = math.floor(share * (target if prethin_target is None else prethin_target))
+        anchor_u = prethin_mod.edge_sample(Xu, st.start, st.cnt, st.pool, boundary_u,
+                                           edge_distance, tie, goal,
+                                           spacing if spacing is not None
+                                           else median_spacing(Xu))
+    stats["n_edge_sure"] = int(anchor_u.sum())
+
     # 5. progressive removal: duplicate copies first (importance 0), then the greedy sequence
     boundary = boundary_u[inverse]
+    anchor = anchor_u[inverse]
     is_rep = np.zeros(n, dtype=bool)
     is_rep[rep] = True
-    dup_order = np.flatnonzero(~is_rep & ~frozen & ~boundary)
-    never_u = boundary_u | frozen[rep]  # never removed
+    dup_order = np.flatnonzero(~is_rep & ~frozen & ~anchor)
+    never_u = anchor_u | frozen[rep]  # never removed
     n_remove = n - target
     to_target = max(0, n_remove - dup_order.size)
-    tie = coordinate_hash(X[rep])
     normals_u = st.initial_normals
-    fixed_u = never_u | protected(deviation_u, threshold)  # never swapped out by the refinement
+    # never swapped out by the refinement (a flagged point the cut kept stays, sure or not)
+    fixed_u = never_u | boundary_u | protected(deviation_u, threshold)
 
     # 4b. beyond the paper: thin the smooth points to a multiple of the target first
     thinned = np.zeros(0, dtype=np.int64)
@@ -497,10 +520,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         Xg = np.ascontiguousarray(Xu[keep_ids])
         st = neighbourhoods(Xg, D, reach)
         st.normals[:] = normals_u[keep_ids]  # the whole cloud's normals, as without thinning
-        boundary_g, tie_g = boundary_u[keep_ids], tie[keep_ids]
+        boundary_g, tie_g = anchor_u[keep_ids], tie[keep_ids]
         alive = ~never_u[keep_ids]
     else:
-        Xg, boundary_g, tie_g, alive = Xu, boundary_u, tie, ~never_u
+        Xg, boundary_g, tie_g, alive = Xu, anchor_u, tie, ~never_u
     lap("prethin")
     # the max_spacing guard's cover lists (removal.guard_allows; empty, unread, without it):
     # the subset's points, then the thinned ones, each already handed to its nearest cover.
@@ -570,7 +593,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     if by_guard:
         target = n - cut  # what the limit allows is the count asked for
     elif cut < n_remove:
-        n_b = int(boundary.sum())
+        n_b = int(anchor.sum())
         n_f = int(frozen.sum())
         n_g = n - order.size - int((boundary | frozen).sum())
         message = short_message(target, n, n - order.size, n - cut, n_b, n_g, options.guard,

@@ -1,0 +1,109 @@
+"""``edge_share``: flagged points are sure of at most a share of the count (beyond the paper).
+
+At small targets the flags alone used to take the whole count and leave the faces empty; now
+an even sample along the edges of that share is kept for certain and the other flagged points
+compete with the rest, still flagged."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from tiledsimplify import SimplifyOptions, simplify_points
+from tiledsimplify.core import prethin
+from tiledsimplify.core.heap import coordinate_hash
+from tiledsimplify.core.simplify import median_spacing, neighbourhoods
+from tiledsimplify.core.voronoi import scale_of
+from tiledsimplify.errors import BudgetWarning, InputError
+from tiledsimplify.io import read_mesh
+from tiledsimplify.synthetic import sample_surface_even
+
+
+@pytest.fixture(scope="module")
+def fandisk(data_dir):
+    V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
+    return sample_surface_even(V, F, 8000, seed=0, tol=0.001)[0]
+
+
+def _band():
+    """A plane sampled on a jittered grid with a band of flagged points along y = 0."""
+    rng = np.random.default_rng(5)
+    g = np.stack(np.meshgrid(np.arange(120.0), np.arange(40.0)), -1).reshape(-1, 2)
+    g += 0.2 * rng.random(g.shape)
+    X = np.c_[g[:, 0], g[:, 1] - 20.0, np.zeros(len(g))]
+    flags = np.abs(X[:, 1]) < 1.6
+    return X, flags, np.abs(X[:, 1])
+
+
+@pytest.mark.parametrize("goal", [20, 60, 150])
+def test_edge_sample_is_an_even_sample_along_the_edge_nearest_it_first(goal):
+    X, flags, distance = _band()
+    st = neighbourhoods(X, scale_of(X), reach=12 * median_spacing(X))
+    got = prethin.edge_sample(X, st.start, st.cnt, st.pool, flags, distance,
+                              coordinate_hash(X), goal, median_spacing(X))
+    assert not (got & ~flags).any()
+    # at most the goal, and near it (a band of rows of a grid: the count jumps with the radius)
+    assert 0.75 * goal <= got.sum() <= goal
+    # nearer the line than the flagged points are on average, and spread along all of it
+    # (one row where the goal leaves room for one: 120 along the line)
+    assert distance[got].mean() < (0.75 if goal <= 120 else 1.0) * distance[flags].mean()
+    along = np.sort(X[got, 0])
+    gaps = np.diff(along)
+    assert along[0] < 2 * gaps.mean() and along[-1] > 119 - 2 * gaps.mean()
+    assert gaps.max() < 2.5 * gaps.mean()
+
+
+def test_edge_sample_keeps_every_flag_within_the_goal_and_none_at_zero():
+    X, flags, distance = _band()
+    st = neighbourhoods(X, scale_of(X), reach=12 * median_spacing(X))
+    args = (X, st.start, st.cnt, st.pool, flags, distance, coordinate_hash(X))
+    assert np.array_equal(prethin.edge_sample(*args, int(flags.sum()), 1.0), flags)
+    assert not prethin.edge_sample(*args, 0, 1.0).any()
+
+
+def test_a_small_target_is_met_with_the_faces_covered(fandisk):
+    X = fandisk
+    target = round(0.05 * len(X))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", BudgetWarning)  # the count is met: no warning
+        res = simplify_points(X, 0.05)
+    with pytest.warns(BudgetWarning, match="boundary"):
+        old = simplify_points(X, 0.05, options=SimplifyOptions(edge_share=math.inf))
+    flagged = int(old.boundary.sum())
+    assert flagged > target  # the flags alone exceed the count
+    assert old.keep.sum() == flagged  # and took all of it: nothing on the faces
+    assert res.keep.sum() == target and res.reached
+    # the same points are flagged; 0.4 of the count at most (the default) is sure of them
+    assert np.array_equal(res.boundary, old.boundary)
+    assert 0.3 * target <= res.stats["n_edge_sure"] <= 0.4 * target
+    assert (res.keep & res.boundary).sum() >= res.stats["n_edge_sure"]
+    # no holes: the widest gap is a fraction of the flags-only one, at fewer points
+
+    def hausdorff(keep):
+        return cKDTree(X[keep]).query(X)[0].max()
+    assert hausdorff(res.keep) < 0.4 * hausdorff(old.keep)
+
+
+def test_a_share_the_flags_stay_under_changes_nothing(fandisk):
+    X = fandisk
+    res = simplify_points(X, 0.4)
+    assert 0 < res.boundary.sum() < 0.4 * res.target  # under the default share
+    old = simplify_points(X, 0.4, options=SimplifyOptions(edge_share=math.inf))
+    assert res.stats["n_edge_sure"] == res.boundary.sum()
+    for name in ("keep", "rank", "boundary"):
+        assert np.array_equal(getattr(res, name), getattr(old, name))
+
+
+@pytest.mark.parametrize("bad", [0, -0.5, 1.5, float("nan"), "half"])
+def test_edge_share_is_checked(bad):
+    with pytest.raises(InputError, match="edge_share"):
+        SimplifyOptions(edge_share=bad)
+
+
+def test_edge_share_defaults_by_mode():
+    assert SimplifyOptions().edge_share_value == 0.4
+    assert SimplifyOptions(mode="paper").edge_share_value == math.inf
+    assert SimplifyOptions(edge_share=math.inf).edge_share_value == math.inf
+    assert SimplifyOptions(mode="paper", edge_share=0.3).edge_share_value == 0.3
