@@ -29,6 +29,7 @@ truth: overlapping views, registration residue and scanner noise).
     python benchmarks/quality.py --list
     python benchmarks/quality.py --from-json out.json       # tables + summary, no new run
     python benchmarks/quality.py --cases all --modes coverage --skip all --option edge_width=0.9
+    python benchmarks/quality.py --ratio 0.05 --modes coverage --cases bunny,fandisk,autzen
 
 The summary table gives, per case and mode, our value against the best peer's at the same
 count (bold where ours is at least as good).
@@ -39,6 +40,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -369,10 +371,15 @@ def main(argv=None):
                    help="points of the evenly sampled / scanned CAD parts (default 20000)")
     p.add_argument("--lidar-points", type=int, default=None,
                    help="crop the LiDAR file to this many points around its centre")
+    p.add_argument("--ratio", type=float, default=None,
+                   help="keep this fraction in every case instead of its own (20 %% of the CAD "
+                        "parts and Autzen, 10 %% of the Bunny), e.g. 0.05 or 0.02")
     p.add_argument("--json", default=None, help="also write every number to this JSON file")
     p.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
                    help="print the tables and the summary of earlier --json runs; run nothing")
     args = p.parse_args(argv)
+    if args.ratio is not None and not 0 < args.ratio <= 1:
+        p.error(f"--ratio must be in (0, 1], got {args.ratio}")
     if args.from_json:
         results = merge_results(json.loads(Path(f).read_text()) for f in args.from_json)
         for res in results:
@@ -432,6 +439,9 @@ def main(argv=None):
         t = time.perf_counter()
         print(f"{name} ...", file=sys.stderr, flush=True)
         case = load_case(name, args.cad_points, args.lidar_points)
+        if args.ratio is not None:
+            case.title = re.sub(r"\d+ %", f"{args.ratio:.0%}", case.title)
+            case.ratio = args.ratio
         res = run_case(case, methods, ours)
         res["seconds_case"] = time.perf_counter() - t
         results.append(res)
