@@ -606,7 +606,8 @@ def band(distance, angle, width):
     """The flags: candidates within ``width`` local spacings of their fitted edge, or within
     ``SOFT_WIDTH * width`` where the faces fold by less than ``SOFT_ANGLE`` (a soft edge).
 
-    Beyond the paper. Flags are always kept, so every flagged row is budget taken from the
+    Beyond the paper. Flags are kept (up to ``edge_share`` of the count: until 2026-12-05,
+    when this was measured, all of them), so every flagged row is budget taken from the
     faces. A row beside a soft edge (a crease, a fillet edge) buys less than one beside a
     sharp one: the faces there differ less from one plane. Measured on the 37 quality cases
     (soft angle 60°, width 0.7 against no soft band; ``benchmarks/quality.py``): Bunny flags

@@ -172,8 +172,8 @@ def edge_sample(X, start, cnt, pool, flags, distance, tie, goal, spacing):
     wins (the smallest if none is). Returns the bool mask (all of ``flags`` if they are no
     more than ``goal``; none if ``goal`` is 0).
 
-    Beyond the paper (the option ``edge_share``): flagged points are kept whatever the count,
-    so at small targets they alone would take it — the Fandisk at 5 %, 1,524 flags for a
+    Beyond the paper (the option ``edge_share``): kept whatever the count, as the paper
+    keeps its boundary points, flagged points alone would take small targets — the Fandisk at 5 %, 1,524 flags for a
     count of 824 — and leave the faces empty.
     """
     n = X.shape[0]

@@ -14,7 +14,9 @@ changes (Fig. 1):
 3. the importance of every point whose local mesh changed, and of every point with a neighbour
    whose normal changed (the second ring: points ``x`` with ``a ∈ DN_x``, found in ``VN_a``).
 
-Boundary and frozen points are never removed but stay in every neighbourhood. A guard rule
+Boundary and frozen points are never removed but stay in every neighbourhood (the boundary
+points here are those sure of being kept, at most ``options.edge_share`` of the count; the
+other flagged points are removed like any other). A guard rule
 (:data:`GUARDS`) may veto a removal; the vetoed point is then kept. The ``max_spacing`` guard
 bounds the gaps (issue #5, "no holes": a maximum spacing in model units): every removed point
 is covered by a remaining point within the limit, and a removal must hand the removed point

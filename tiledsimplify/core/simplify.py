@@ -345,14 +345,16 @@ def _warn_lost_neighbours(Xu, D, options, spacing, degree, lonely):
 
 def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, state=None,
                     prethin_target=None, covered=None):
-    """Simplify a point cloud, keeping (and flagging) every point on or near a sharp edge.
+    """Simplify a point cloud, flagging every point on or near a sharp edge and keeping them
+    (up to ``options.edge_share`` of the count; beyond it an even sample along the edges).
 
     Parameters
     ----------
     xyz : array_like (n, 3)
         Point coordinates. Exact duplicates are allowed: the algorithm runs on one copy (a
         frozen one if any), the other copies share its flags and normal and are removed first,
-        with importance 0 — unless they are frozen or boundary points, which are always kept.
+        with importance 0 — unless they are frozen or boundary points sure of being kept
+        (``options.edge_share``), which are always kept.
         NaN or infinite coordinates are an error.
     ratio : float in (0, 1], optional
         Fraction of the points to keep. Give this or ``count`` — or neither, with
