@@ -175,7 +175,9 @@ class SimplifyOptions:
         ``inf``: every flagged point kept whatever the count (as until 2026-12-05; the count
         may then be missed). None: the mode's default (``"coverage"``: :data:`EDGE_SHARE`,
         0.4; ``"paper"``: ``inf``, as published). A tiled run applies it to each tile's share
-        of the count (as the pre-thinning does).
+        of the count (as the pre-thinning does). The share is of the count asked:
+        :meth:`SimplifyResult.keep_at` a smaller count keeps the same sure points, a larger
+        share of it.
     """
 
     mode: str = "coverage"
