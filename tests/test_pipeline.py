@@ -371,7 +371,7 @@ def test_max_spacing_holds_after_a_las_outputs_quantisation(bunny, tmp_path):
     run(path, tmp_path / "o.npy", tile_points=3000, workers=1, store=tmp_path / "st",
         options=SimplifyOptions(guard="max_spacing", max_spacing=limit))
     with pytest.raises(InputError, match="max_spacing_less: the LAS output grid's move here, "
-                                         "none in the store"):
+                                         "absent in the store"):
         run(path, out, tile_points=3000, workers=1, store=tmp_path / "st",
             options=SimplifyOptions(guard="max_spacing", max_spacing=limit))
     # a limit the grid's step could break on its own is refused, naming the way out
@@ -1269,6 +1269,16 @@ def test_a_store_for_other_settings_is_refused_naming_what_differs(bunny, tmp_pa
     st = path.stat()
     os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))  # the input, touched
     with pytest.raises(InputError, match=r"\(the same settings, but the input files differ"):
+        run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, store=store, progress=False)
+    # a store of an older version, which had no such option: named, not "the same settings"
+    # (a setting the store lacks compared equal to one set to None here)
+    import zarr
+    root = zarr.open_group(str(store), mode="r+")
+    config = dict(root.attrs["config"])
+    del config["options"]["edge_share"]
+    root.attrs["config"] = {**config, "fingerprint": "of an older version"}
+    with pytest.raises(InputError, match=r"\(options.edge_share: None here, absent in the "
+                                         r"store\)"):
         run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, store=store, progress=False)
 
 

@@ -174,8 +174,11 @@ def _store_differences(config, settings):
         return out
     here = flat(json.loads(json.dumps(settings, default=str)))  # as the store saved them
     there = flat({k: v for k, v in config.items() if k != "fingerprint"})
-    diffs = [f"{key}: {here.get(key, 'none')} here, {there.get(key, 'none')} in the store"
-             for key in sorted(set(here) | set(there)) if here.get(key) != there.get(key)]
+    def say(d, key):  # a setting one side lacks (a store of an older version): say so
+        return f"{d[key]}" if key in d else "absent"
+    diffs = [f"{key}: {say(here, key)} here, {say(there, key)} in the store"
+             for key in sorted(set(here) | set(there))
+             if key not in here or key not in there or here[key] != there[key]]
     return "; ".join(diffs) if diffs else (
         "the same settings, but the input files differ in name, size or modification time")
 
