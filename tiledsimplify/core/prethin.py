@@ -173,8 +173,8 @@ def edge_sample(X, start, cnt, pool, flags, distance, tie, goal, spacing):
     more than ``goal``; none if ``goal`` is 0).
 
     Beyond the paper (the option ``edge_share``): kept whatever the count, as the paper
-    keeps its boundary points, flagged points alone would take small targets — the Fandisk at 5 %, 1,524 flags for a
-    count of 824 — and leave the faces empty.
+    keeps its boundary points, flagged points alone would take small targets — the Fandisk at
+    5 %, 1,524 flags for a count of 824 — and leave the faces empty.
     """
     n = X.shape[0]
     ids = np.flatnonzero(flags)
@@ -192,9 +192,9 @@ def edge_sample(X, start, cnt, pool, flags, distance, tie, goal, spacing):
     best, last = None, None
     for _ in range(MAX_STEPS):
         k = disk_sample(X, start, cnt, pool, none, order, r, keep, stamp, stack)
-        if best is None or (k <= goal and (best[0] > goal or k > best[0])) or (
-                k > goal and best[0] > goal and k < best[0]):
-            best = (k, keep.copy())
+        rank = (k > goal, abs(k - goal))  # at most the goal first, then the nearest to it
+        if best is None or rank < best[0]:
+            best = (rank, keep.copy())
         if goal * (1.0 - TOLERANCE) <= k <= goal:
             break
         slope = -1.0  # d log(count) / d log(r) along a line
