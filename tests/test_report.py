@@ -104,7 +104,10 @@ def test_report_files_images_and_metrics(block):
     assert saved == pytest.approx(want, rel=1e-12)
     assert type(saved["n_kept"]) is int and type(saved["n_original"]) is int  # not 6000.0
     assert {"edge_coverage", "boundary_f1", "adaptivity"} <= set(got)
-    assert f"{int(flagged.sum()):,} (" in (out / "report.md").read_text()
+    md = (out / "report.md").read_text()
+    assert f"in the result: {int(flagged.sum()):,} (" in md
+    # the flags of a kept-only result are the kept points' (edge_share may keep fewer): said
+    assert "sharp_edge flags are the kept points' only" in md
 
 
 def test_a_wide_cloud_gets_a_wide_panel(tmp_path):

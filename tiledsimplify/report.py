@@ -148,6 +148,11 @@ def _resolve(original, result_xyz, cols):
     if flags is not None:
         boundary = np.zeros(n, bool)
         boundary[idx[np.asarray(flags).astype(bool)]] = True
+        if len(result_xyz) < n:  # flagged points the count did not keep are not in the file
+            notes.append("sharp_edge flags are the kept points' only: where more points were "
+                         "flagged than the count has room for (edge_share), the others are not "
+                         "in the result, and boundary recall counts the kept ones; "
+                         "`tiledsimplify simplify --all-points` writes every point's flag.")
     return keep, original[keep], boundary, notes
 
 
@@ -305,8 +310,8 @@ def _markdown(input_path, result_path, rep, files, mesh):
         f"- result: `{result_path}` — {rep.n_kept:,} points ({ratio:.1%} of the input)",
     ]
     if rep.n_boundary is not None:
-        lines.append(f"- points flagged on sharp edges (`sharp_edge`): {rep.n_boundary:,} "
-                     f"({rep.n_boundary / rep.n_input:.1%} of the input)")
+        lines.append(f"- points flagged on sharp edges (`sharp_edge`) in the result: "
+                     f"{rep.n_boundary:,} ({rep.n_boundary / rep.n_input:.1%} of the input)")
     else:
         lines.append("- the result carries no `sharp_edge` flags: no boundary figure")
     if mesh:
