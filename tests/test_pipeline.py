@@ -1306,3 +1306,25 @@ def test_unbounded_options_are_saved_in_the_store_by_name(tmp_path, caplog):
             tile_points=1000, progress=False)
     assert not [r for r in caplog.records if r.getMessage().startswith("tile ")]  # resumed
     assert np.array_equal(np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy"))
+
+
+def test_edge_share_in_tiles_agrees_between_passes(tmp_path):
+    """Where a tile flags more points than ``edge_share`` of its share of the count, its sure
+    flags are an even sample of them, the same in every pass over it (the global target's
+    share, as the pre-thinning aims at): tiles first run far (floor 0.05) or stopped at their
+    share (floor 0.99, then deeper passes) give the same bytes, and the count is met — with
+    every flagged point kept it could not be."""
+    rng = np.random.default_rng(8)
+    xy = rng.random((12000, 2)) * [2.0, 3.0] - [1.0, 0.0]
+    X = np.c_[xy, -np.abs(xy[:, 0])]  # a roof folding by 90° along x = 0
+    path = tmp_path / "roof.npy"
+    np.save(path, X)
+    a = run(path, tmp_path / "a.npy", ratio=0.01, tile_points=2000, floor=0.99)
+    b = run(path, tmp_path / "b.npy", ratio=0.01, tile_points=2000, floor=0.05)
+    assert a.reached and b.reached and a.n_tiles >= 4 and a.n_output == 120
+    assert a.n_deeper >= 1  # some tile ran again, deeper, with the same sure flags
+    assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
+    every = run(path, tmp_path / "c.npy", ratio=0.01, tile_points=2000,
+                options={"edge_share": float("inf")})
+    assert not every.reached and every.n_output == every.n_boundary > 120
+    assert 0 < a.n_boundary < 0.6 * 120  # flagged points kept: at most the share, and a few
