@@ -430,7 +430,8 @@ def test_keep_at_below_what_the_run_removed_says_why():
     res = simplify_points(X, count=300, options=SimplifyOptions(progressive=False))
     assert res.keep_at(count=450).sum() == 450  # above the target: from the recorded order
     with pytest.raises(InputError, match=r"keep_at: 100 points asked, but only 300 of 600 were "
-                                         r"removed in this run, so at least 300 remain: boundary "
-                                         r"and frozen points are never removed, and a run with "
+                                         r"removed in this run, so at least 300 remain: frozen "
+                                         r"points and the boundary points sure of being kept are "
+                                         r"never removed, and a run with "
                                          r"options.progressive=False"):
         res.keep_at(count=100)

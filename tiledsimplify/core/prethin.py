@@ -7,7 +7,8 @@ local update of the Voronoi neighbourhoods and local meshes (~20 µs, :mod:`.rem
 step reaches a subset of about ``prethin`` times the target first, by passes over the
 neighbourhood graph (each ~0.1 s on a 300k-point tile):
 
-1. every *fixed* point (boundary and frozen: the greedy never removes them) is kept;
+1. every *fixed* point (frozen, and boundary up to ``edge_share`` of the count: the greedy
+   never removes them) is kept;
 2. the other points, block by block (:data:`BLOCK` consecutive points; the core's points
    come along a Z-order curve, so a block is a compact patch) and in the order of a
    coordinate hash within each (no direction preferred), are kept unless a kept point lies

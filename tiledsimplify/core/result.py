@@ -14,7 +14,8 @@ class SimplifyResult:
     Attributes
     ----------
     keep : bool (n,)
-        Points kept at the requested count (boundary and frozen points always are).
+        Points kept at the requested count (frozen points always are, boundary points up to
+        ``options.edge_share`` of it).
     boundary : bool (n,)
         Points flagged on or near a sharp edge.
     normals : float64 (n, 3)
@@ -70,10 +71,10 @@ class SimplifyResult:
         if target < floor:
             raise InputError(
                 f"keep_at: {target} points asked, but only {self.order.size} of {self.n} were "
-                f"removed in this run, so at least {floor} remain: boundary and frozen points "
-                "are never removed, and a run with options.progressive=False or "
-                "progressive_until stops early. Ask for that many or more, or run "
-                "simplify_points again with the smaller target.")
+                f"removed in this run, so at least {floor} remain: frozen points and the "
+                "boundary points sure of being kept are never removed, and a run with "
+                "options.progressive=False or progressive_until stops early. Ask for that many "
+                "or more, or run simplify_points again with the smaller target.")
         keep = np.ones(self.n, dtype=bool)
         keep[self.order[: self.n - target]] = False
         return keep

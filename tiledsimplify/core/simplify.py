@@ -384,8 +384,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     -------
     SimplifyResult
         ``keep``, ``boundary``, ``normals``, ``rank``, ``importance`` and the full progressive
-        order (see :class:`SimplifyResult`). If boundary and frozen points alone exceed the
-        target, all of them are kept, ``res.reached`` is False, ``res.message`` says why, and a
+        order (see :class:`SimplifyResult`). If the points sure of being kept (frozen ones, and
+        boundary ones up to ``options.edge_share`` of the count) exceed the target, all of them
+        are kept, ``res.reached`` is False, ``res.message`` says why, and a
         :class:`~tiledsimplify.errors.BudgetWarning` is issued.
 
     Notes
@@ -501,8 +502,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         # the subset holds at least ``aim`` points; with ``prethin_target`` it is the same
         # for every count asked (the passes over one tile agree)
         aim = m - to_target if prethin_target is None else int(prethin_target)
-        # boundary and frozen points all stay; the ones the refinement protects are drawn
-        # first but thinned like the rest (28 % of the noisy tray scan, see prethin). With a
+        # sure boundary and frozen points all stay; the ones the refinement protects (and the
+        # other flagged points) are drawn first but thinned like the rest (28 % of the noisy tray scan, see prethin). With a
         # max_spacing guard the disk is at most a share of the limit (and just that with no
         # count to aim at), so that every thinned point starts covered
         cap = prethin_mod.GUARD_RADIUS * options.max_spacing if guarded else math.inf
