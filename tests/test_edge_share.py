@@ -107,3 +107,23 @@ def test_edge_share_defaults_by_mode():
     assert SimplifyOptions(mode="paper").edge_share_value == math.inf
     assert SimplifyOptions(edge_share=math.inf).edge_share_value == math.inf
     assert SimplifyOptions(mode="paper", edge_share=0.3).edge_share_value == 0.3
+
+
+def test_a_short_run_counts_what_kept_it_with_the_sure_flags(fandisk):
+    """With a max_spacing guard too tight for the count, the message splits what had to be
+    kept into boundary points sure of being kept and points the guard vetoed. The vetoed ones
+    were counted as everything never removed less *every* flagged point, so flagged points
+    that were not sure (and were removed, or vetoed) went missing from the sum."""
+    import re
+    X = fandisk
+    with pytest.warns(BudgetWarning):
+        res = simplify_points(X, 0.05, options=SimplifyOptions(guard="max_spacing",
+                                                               max_spacing=0.02))
+    assert not res.reached and res.stats["n_edge_sure"] < res.boundary.sum()
+    must = len(X) - res.order.size  # never removed
+    got = re.search(r"but (\d+) must be kept \((\d+) boundary, 0 frozen, overlapping ones "
+                    r"counted once; (\d+) vetoed", res.message)
+    assert got, res.message
+    assert int(got[1]) == must
+    assert int(got[2]) == res.stats["n_edge_sure"]
+    assert int(got[2]) + int(got[3]) == must

@@ -598,7 +598,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     elif cut < n_remove:
         n_b = int(anchor.sum())
         n_f = int(frozen.sum())
-        n_g = n - order.size - int((boundary | frozen).sum())
+        n_g = n - order.size - int((anchor | frozen).sum())  # never removed, yet removable
         message = short_message(target, n, n - order.size, n - cut, n_b, n_g, options.guard,
                                 frozen=n_f)
         warnings.warn(message, BudgetWarning, stacklevel=2)
