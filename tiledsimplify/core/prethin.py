@@ -113,6 +113,20 @@ def disk_sample(X, start, cnt, pool, fixed, order, r, keep, stamp, stack):
     return kept
 
 
+def _secant(r, k, last, aim, model):
+    """The next radius of a search for the one whose sample holds ``aim`` points: ``k`` at
+    ``r`` now, ``last`` the ``(radius, count)`` before (or None). A secant step on ``log(count)``
+    against ``log(r)``, its slope clamped to [-4, -0.5]; the ``model``'s slope (-2 on a
+    surface, -1 along a line) where there is no earlier count to take it from. Half the
+    radius if nothing was kept."""
+    if k <= 0:
+        return 0.5 * r
+    slope = model
+    if last is not None and last[1] > 0 and last[1] != k:
+        slope = min(-0.5, max(-4.0, math.log(k / last[1]) / math.log(r / last[0])))
+    return r * (aim / k) ** (1.0 / slope)
+
+
 def subset(X, start, cnt, pool, fixed, goal, spacing, tie, least=0, first=None,
            max_radius=math.inf):
     """About ``goal`` points of ``X``: every ``fixed`` one and a disk sample of the rest, in
@@ -153,11 +167,7 @@ def subset(X, start, cnt, pool, fixed, goal, spacing, tie, least=0, first=None,
             best = (k, keep.copy())
         if abs(k - free_goal) <= TOLERANCE * free_goal or (r == max_radius and k >= free_goal):
             break  # near the goal, or as far as the radius may go
-        slope = -2.0  # d log(count) / d log(r) of the model
-        if last is not None and k > 0 and last[1] > 0 and last[1] != k:
-            slope = min(-0.5, max(-4.0, math.log(k / last[1]) / math.log(r / last[0])))
-        last = (r, k)
-        r = min(r * ((free_goal / k) ** (1.0 / slope) if k > 0 else 0.5), max_radius)
+        r, last = min(_secant(r, k, last, free_goal, -2.0), max_radius), (r, k)
     k, mask = best
     if n_fixed + k < least or (by_radius and n_fixed + k > MAX_SHARE * n):
         return None
@@ -198,11 +208,7 @@ def edge_sample(X, start, cnt, pool, flags, distance, tie, goal, spacing):
             best = (rank, keep.copy())
         if goal * (1.0 - TOLERANCE) <= k <= goal:
             break
-        slope = -1.0  # d log(count) / d log(r) along a line
-        if last is not None and k > 0 and last[1] > 0 and last[1] != k:
-            slope = min(-0.5, max(-4.0, math.log(k / last[1]) / math.log(r / last[0])))
-        last = (r, k)
-        r *= (aim / k) ** (1.0 / slope) if k > 0 else 0.5
+        r, last = _secant(r, k, last, aim, -1.0), (r, k)  # along a line: count ~ 1 / r
     return best[1]
 
 

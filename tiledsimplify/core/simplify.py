@@ -503,9 +503,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         # for every count asked (the passes over one tile agree)
         aim = m - to_target if prethin_target is None else int(prethin_target)
         # sure boundary and frozen points all stay; the ones the refinement protects (and the
-        # other flagged points) are drawn first but thinned like the rest (28 % of the noisy tray scan, see prethin). With a
-        # max_spacing guard the disk is at most a share of the limit (and just that with no
-        # count to aim at), so that every thinned point starts covered
+        # other flagged points) are drawn first but thinned like the rest (28 % of the noisy
+        # tray scan, see prethin). With a max_spacing guard the disk is at most a share of
+        # the limit (and just that with no count to aim at), so that every thinned point
+        # starts covered
         cap = prethin_mod.GUARD_RADIUS * options.max_spacing if guarded else math.inf
         sub = prethin_mod.subset(Xu, st.start, st.cnt, st.pool, never_u,
                                  math.ceil(options.prethin_factor * aim)
