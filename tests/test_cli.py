@@ -508,14 +508,29 @@ def test_a_folder_without_las_files_says_what_it_holds(tmp_path, caplog):
     assert "file not found" not in caplog.text
 
 
+def _roof(tmp_path, fold):
+    """8,000 points of a roof folding by ``fold`` degrees along x = 0, saved as roof.npy."""
+    rng = np.random.default_rng(6)
+    xy = rng.random((8000, 2)) * 2 - 1
+    X = np.c_[xy, -np.tan(np.deg2rad(fold / 2)) * np.abs(xy[:, 0])]
+    path = tmp_path / "roof.npy"
+    np.save(path, X)
+    return path
+
+
+def _refused(caplog, command, path, out, ratio, flag, value, message):
+    """``command`` with ``flag value`` fails before any work (exit 2), naming the option."""
+    with caplog.at_level("ERROR", logger="tiledsimplify"):
+        assert main([command, str(path), str(out), "--ratio", ratio, "-q", flag, value]) \
+            == EXIT_INPUT
+    assert message in caplog.text
+    assert not out.exists()
+
+
 def test_edge_angle_reaches_both_commands(tmp_path, caplog):
     """``--edge-angle``: a 35° ridge is flagged at 30 and not at the default 40, by simplify
     and by run; a value outside (0, 90] fails before any work, naming the option."""
-    rng = np.random.default_rng(6)
-    xy = rng.random((8000, 2)) * 2 - 1
-    X = np.c_[xy, -np.tan(np.deg2rad(17.5)) * np.abs(xy[:, 0])]  # folds by 35° along x = 0
-    path = tmp_path / "roof.npy"
-    np.save(path, X)
+    path = _roof(tmp_path, 35.0)
     for command in ("simplify", "run"):
         flagged = {}
         for angle in (None, "30"):
@@ -525,23 +540,15 @@ def test_edge_angle_reaches_both_commands(tmp_path, caplog):
                 == EXIT_OK
             flagged[angle] = int(np.load(out)["sharp_edge"].sum())
         assert flagged[None] == 0 and flagged["30"] > 10, (command, flagged)
-        out = tmp_path / f"{command}_bad.npy"
-        with caplog.at_level("ERROR", logger="tiledsimplify"):
-            assert main([command, str(path), str(out), "--ratio", "0.3", "-q",
-                         "--edge-angle", "95"]) == EXIT_INPUT
-        assert "options.edge_angle must be a fold in degrees" in caplog.text
-        assert not out.exists()
+        _refused(caplog, command, path, tmp_path / f"{command}_bad.npy", "0.3", "--edge-angle",
+                 "95", "options.edge_angle must be a fold in degrees")
 
 
 def test_edge_share_reaches_both_commands(tmp_path, caplog):
     """``--edge-share``: on a roof whose ridge flags more points than a 0.5 % count, the default
     keeps the count (exit 0) with some flagged points; ``inf`` keeps every flagged point and
     misses it (exit 3); a share outside (0, 1] fails before any work, naming the option."""
-    rng = np.random.default_rng(6)
-    xy = rng.random((8000, 2)) * 2 - 1
-    X = np.c_[xy, -np.abs(xy[:, 0])]  # folds by 90° along x = 0
-    path = tmp_path / "roof.npy"
-    np.save(path, X)
+    path = _roof(tmp_path, 90.0)
     for command in ("simplify", "run"):
         got = {}
         for share, code in ((None, EXIT_OK), ("inf", EXIT_BUDGET)):
@@ -552,12 +559,8 @@ def test_edge_share_reaches_both_commands(tmp_path, caplog):
             got[share] = np.load(out)
         assert len(got[None]) == 40 and 0 < got[None]["sharp_edge"].sum() <= 16, command
         assert len(got["inf"]) == got["inf"]["sharp_edge"].sum() > 40, command
-        out = tmp_path / f"{command}_bad.npy"
-        with caplog.at_level("ERROR", logger="tiledsimplify"):
-            assert main([command, str(path), str(out), "--ratio", "0.005", "-q",
-                         "--edge-share", "2"]) == EXIT_INPUT
-        assert "options.edge_share must be a share of the count" in caplog.text
-        assert not out.exists()
+        _refused(caplog, command, path, tmp_path / f"{command}_bad.npy", "0.005",
+                 "--edge-share", "2", "options.edge_share must be a share of the count")
 
 
 def test_max_spacing_reaches_both_commands(cloud, tmp_path, caplog, capsys):
