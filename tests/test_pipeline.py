@@ -1,6 +1,7 @@
 """The tiled pipeline: exact global count, agreement with the untiled core, the same output for
 every scheduler, resume, LAS/LAZ end to end, and the command line."""
 
+import json
 import time
 from pathlib import Path
 
@@ -1274,11 +1275,20 @@ def test_a_store_for_other_settings_is_refused_naming_what_differs(bunny, tmp_pa
     # (a setting the store lacks compared equal to one set to None here)
     import zarr
     root = zarr.open_group(str(store), mode="r+")
-    config = dict(root.attrs["config"])
+    made = json.loads(json.dumps(root.attrs["config"]))
+    config = json.loads(json.dumps(made))
     del config["options"]["edge_share"]
     root.attrs["config"] = {**config, "fingerprint": "of an older version"}
     with pytest.raises(InputError, match=r"\(options.edge_share: None here, absent in the "
                                          r"store\)"):
+        run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, store=store, progress=False)
+    # ... and one whose tiles saved other results (before 2026-12-05: no ``fixed`` points for
+    # the refinement, which would have failed reading them): refused, naming it
+    config = json.loads(json.dumps(made))
+    del config["tile_results"]
+    root.attrs["config"] = {**config, "fingerprint": "of an older version"}
+    with pytest.raises(InputError, match=r"\(tile_results: step, importance, boundary, fixed, "
+                                         r"normal here, absent in the store\)"):
         run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, store=store, progress=False)
 
 

@@ -94,15 +94,15 @@ def test_subset_draws_first_points_first_block_by_block(block, monkeypatch):
 
 
 def test_protected_points_are_thinned_boundary_points_are_not():
-    """The points the refinement protects may be thinned (a noisy scan has many); boundary
-    points never are."""
+    """The points the refinement protects may be thinned (a noisy scan has many); the flags'
+    core band (kept for certain) never is."""
     X = _plane(8000, seed=12, noise=0.004)
     X[:, 2] += np.where(X[:, 0] > 0, X[:, 0], 0.0)  # a crease along x = 0
     res = simplify_points(X, 0.1)
     k = len(X) - res.stats["n_prethin_subset"]
-    guarded = protected(res.deviation, res.threshold) & ~res.boundary
-    assert res.boundary.sum() > 0 and guarded.sum() > 0
-    assert not res.boundary[res.order[:k]].any()
+    guarded = protected(res.deviation, res.threshold) & ~res.band
+    assert res.band.sum() > 0 and guarded.sum() > 0
+    assert not res.band[res.order[:k]].any()
     assert guarded[res.order[:k]].any()
 
 
@@ -142,7 +142,8 @@ def test_prethin_keeps_flags_and_count():
     assert "n_prethin_subset" in res.stats and "n_prethin_subset" not in off.stats
     assert res.keep.sum() == off.keep.sum() == 800
     assert np.array_equal(res.boundary, off.boundary)  # flags from the whole cloud
-    assert res.boundary.sum() > 0 and res.keep[res.boundary].all()
+    assert np.array_equal(res.band, off.band)
+    assert res.band.sum() > 0 and res.keep[res.band].all()
     assert np.allclose(res.normals, off.normals)
 
 

@@ -235,8 +235,9 @@ def test_refine_option_validated():
 
 
 def test_refinement_keeps_strongly_non_planar_points_and_may_swap_weak_candidates(data_dir):
-    """Fixed in the refinement: boundary points and kept points whose boundary measure is above
-    PROTECT x the threshold; kept candidates just above the threshold may be swapped out."""
+    """Fixed in the refinement: the flags' core band and kept points whose boundary measure is
+    above PROTECT x the threshold; kept candidates just above the threshold may be swapped
+    out."""
     V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
     clean, _ = synthetic.scan(V, F, n_points=8000, seed=0)
     X, _ = synthetic.scan(V, F, n_points=8000, noise=0.1 * synthetic.spacing(clean), seed=0)
@@ -247,7 +248,7 @@ def test_refinement_keeps_strongly_non_planar_points_and_may_swap_weak_candidate
     assert np.array_equal(strong, greedy.keep & protected(greedy.deviation, res.threshold))
     assert strong.sum() > 50
     assert res.keep[strong].all()
-    assert res.keep[res.boundary].all()
-    weak = greedy.keep & ~strong & ~greedy.boundary & (greedy.deviation > res.threshold)
+    assert res.keep[res.band].all()
+    weak = greedy.keep & ~strong & ~greedy.band & (greedy.deviation > res.threshold)
     assert (weak & ~res.keep).any()  # the old rule (every candidate fixed) would keep them all
     assert _hausdorff(X, res.keep) <= _hausdorff(X, greedy.keep)

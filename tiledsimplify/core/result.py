@@ -14,10 +14,17 @@ class SimplifyResult:
     Attributes
     ----------
     keep : bool (n,)
-        Points kept at the requested count (frozen points always are, boundary points up to
+        Points kept at the requested count (frozen points always are, the ``band`` up to
         ``options.edge_share`` of it).
     boundary : bool (n,)
-        Points flagged on or near a sharp edge.
+        Points flagged on or near a sharp edge: within about one spacing of it.
+    band : bool (n,)
+        The flagged points nearest each edge line (mode ``"coverage"``: within
+        ``options.edge_width`` local spacings of a fitted or borrowed line, 0.7 of that beside
+        a soft edge; mode ``"paper"``: every flagged point): the ones kept for certain up to
+        ``options.edge_share`` of the count, and never swapped out by the gap refinement
+        once kept (:mod:`tiledsimplify.core.edge_fit`, step 4). The other flagged points
+        compete with the rest.
     normals : float64 (n, 3)
         Unit normals of the input points (estimated on the full input).
     rank : int64 (n,)
@@ -47,6 +54,7 @@ class SimplifyResult:
     target: int
     message: str = ""
     stats: dict = field(default_factory=dict)
+    band: np.ndarray | None = None
 
     @property
     def n(self):

@@ -168,35 +168,41 @@ def reach_length(Xu, options, spacing=None):
     return factor * spacing if spacing > 0 else math.inf
 
 
-def boundary_flags(Xu, st, options, distance_out=None):
-    """Paper step 3: ``(deviation, boundary flags, threshold)`` as the options' mode says.
+def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
+    """Paper step 3: ``(deviation, core band, flags, threshold)`` as the options' mode says.
 
-    ``distance_out`` (optional, length m): filled in mode ``"coverage"`` with each point's
-    distance to its fitted (or borrowed) edge line in local spacings (``inf``: none), what
-    :func:`.prethin.edge_sample` orders by; ``inf`` everywhere in mode ``"paper"``.
+    ``flags`` are the points reported on or near a sharp edge; the ``core band`` (a subset)
+    the ones a simplification keeps for certain (up to ``edge_share``) and the refinement
+    never swaps out. ``distance_out`` (optional, length m): filled in mode ``"coverage"`` with
+    each point's distance to its fitted (or borrowed) edge line in local spacings (``inf``:
+    none), what :func:`.prethin.edge_sample` orders by; ``inf`` everywhere in mode ``"paper"``.
+    ``spacing``: the cloud's point spacing (:func:`.edge_fit.line_distances`; None: measured).
 
-    ``"paper"``: the one-ring measure with the automatic threshold (§3.1). ``"coverage"``: the
-    two-ring measure, candidates above the threshold, then only those within
-    ``options.edge_width`` local spacings of a fitted edge line — their own or, where that
-    does not flag them (no fit, or a farther edge), a flagged neighbour's
-    (:func:`.edge_fit.borrow`) — less beside a soft edge (:func:`.edge_fit.band`).
+    ``"paper"``: the one-ring measure with the automatic threshold (§3.1); band and flags are
+    the same. ``"coverage"``: the two-ring measure, candidates above the threshold, then the
+    core band: those within ``options.edge_width`` local spacings of a fitted edge line — their
+    own or, where that does not flag them (no fit, or a farther edge), a flagged neighbour's
+    (:func:`.edge_fit.borrow`) — less beside a soft edge (:func:`.edge_fit.band`); the flags
+    add every point within ``options.edge_width`` spacings of a sharp fitted line near it
+    (:func:`.edge_fit.line_distances`).
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
     if distance_out is not None:
         distance_out[:] = np.inf
+    none = np.zeros(m, dtype=bool)
     if options.mode == "paper":
         boundary_mod.all_deviations(Xu, st.normals, st.dn, st.dn_cnt, deviation)
         if not options.detect_boundary:
-            return deviation, np.zeros(m, dtype=bool), float("inf")
+            return deviation, none, none, float("inf")
         flags, threshold = boundary_mod.detect(
             deviation, threshold=options.boundary_threshold, k=options.boundary_k,
             floor=options.boundary_floor)
-        return deviation, flags, threshold
+        return deviation, flags, flags, threshold
     smooth = np.zeros((m, 3))
     edge_fit.smoothed_deviations(Xu, st.dn, st.dn_cnt, smooth, deviation)
     if not options.detect_boundary:
-        return deviation, np.zeros(m, dtype=bool), float("inf")
+        return deviation, none, none, float("inf")
     threshold = (edge_fit.CANDIDATE if options.boundary_threshold is None
                  else float(options.boundary_threshold))
     nn = np.empty(m)
@@ -206,9 +212,14 @@ def boundary_flags(Xu, st, options, distance_out=None):
                       fitted_angle, line, local, float(options.edge_angle))
     distance = np.empty(m) if distance_out is None else distance_out
     angle = np.empty(m)
-    edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, options.edge_width,
-                    edge_fit.band(fitted, fitted_angle, options.edge_width), distance, angle)
-    return deviation, edge_fit.band(distance, angle, options.edge_width), threshold
+    width = options.edge_width
+    edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width,
+                    edge_fit.band(fitted, fitted_angle, width), distance, angle)
+    band = edge_fit.band(distance, angle, width)
+    near = np.full(m, np.inf)
+    edge_fit.line_distances(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width,
+                            float(median_spacing(Xu) if spacing is None else spacing), near)
+    return deviation, band, band | (near <= width), threshold
 
 
 def _options(options):
@@ -345,15 +356,16 @@ def _warn_lost_neighbours(Xu, D, options, spacing, degree, lonely):
 
 def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, state=None,
                     prethin_target=None, covered=None):
-    """Simplify a point cloud, flagging every point on or near a sharp edge and keeping them
-    (up to ``options.edge_share`` of the count; beyond it an even sample along the edges).
+    """Simplify a point cloud, flagging every point on or near a sharp edge and keeping the
+    ones nearest each edge line (up to ``options.edge_share`` of the count; beyond it an even
+    sample along the edges).
 
     Parameters
     ----------
     xyz : array_like (n, 3)
         Point coordinates. Exact duplicates are allowed: the algorithm runs on one copy (a
         frozen one if any), the other copies share its flags and normal and are removed first,
-        with importance 0 — unless they are frozen or boundary points sure of being kept
+        with importance 0 — unless they are frozen or edge points sure of being kept
         (``options.edge_share``), which are always kept.
         NaN or infinite coordinates are an error.
     ratio : float in (0, 1], optional
@@ -385,7 +397,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     SimplifyResult
         ``keep``, ``boundary``, ``normals``, ``rank``, ``importance`` and the full progressive
         order (see :class:`SimplifyResult`). If the points sure of being kept (frozen ones, and
-        boundary ones up to ``options.edge_share`` of the count) exceed the target, all of them
+        the band of flagged ones nearest each edge line up to ``options.edge_share`` of the
+        count) exceed the target, all of them
         are kept, ``res.reached`` is False, ``res.message`` says why, and a
         :class:`~tiledsimplify.errors.BudgetWarning` is issued.
 
@@ -457,7 +470,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
                           float((st.cnt == 0).mean()) if m else 0.0)
     lap("neighbours_normals")
     edge_distance = np.empty(m)
-    deviation_u, boundary_u, threshold = boundary_flags(Xu, st, options, edge_distance)
+    # ``band_u``: the flagged points nearest the edge lines, the ones kept for certain (up to
+    # edge_share) and never swapped out; ``flags_u`` every point reported on or near an edge
+    deviation_u, band_u, flags_u, threshold = boundary_flags(Xu, st, options, edge_distance,
+                                                             spacing)
     lap("boundary")
     code = MEASURES[options.importance]
     weight = 0.0
@@ -466,21 +482,21 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         stats["spacing"] = float(spacing)
 
     tie = coordinate_hash(X[rep])
-    # beyond the paper: the flagged points sure of being kept, at most ``edge_share`` of the
+    # beyond the paper: the band's points sure of being kept, at most ``edge_share`` of the
     # count (of the tile's share of the global one in a tiled run, as every pass over it
     # asks); the other flagged points stay flagged but compete with the rest
-    anchor_u = boundary_u
+    anchor_u = band_u
     share = options.edge_share_value
-    if math.isfinite(share) and not by_guard and boundary_u.any():
+    if math.isfinite(share) and not by_guard and band_u.any():
         goal = math.floor(share * (target if prethin_target is None else prethin_target))
-        anchor_u = prethin_mod.edge_sample(Xu, st.start, st.cnt, st.pool, boundary_u,
+        anchor_u = prethin_mod.edge_sample(Xu, st.start, st.cnt, st.pool, band_u,
                                            edge_distance, tie, goal,
                                            spacing if spacing is not None
                                            else median_spacing(Xu))
     stats["n_edge_sure"] = int(anchor_u.sum())
 
     # 5. progressive removal: duplicate copies first (importance 0), then the greedy sequence
-    boundary = boundary_u[inverse]
+    boundary = flags_u[inverse]
     anchor = anchor_u[inverse]
     is_rep = np.zeros(n, dtype=bool)
     is_rep[rep] = True
@@ -489,8 +505,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     n_remove = n - target
     to_target = max(0, n_remove - dup_order.size)
     normals_u = st.initial_normals
-    # never swapped out by the refinement (a flagged point the cut kept stays, sure or not)
-    fixed_u = never_u | boundary_u | protected(deviation_u, threshold)
+    # never swapped out by the refinement (a point of the band the cut kept stays, sure or not)
+    fixed_u = never_u | band_u | protected(deviation_u, threshold)
 
     # 4b. beyond the paper: thin the smooth points to a multiple of the target first
     thinned = np.zeros(0, dtype=np.int64)
@@ -502,8 +518,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         # the subset holds at least ``aim`` points; with ``prethin_target`` it is the same
         # for every count asked (the passes over one tile agree)
         aim = m - to_target if prethin_target is None else int(prethin_target)
-        # sure boundary and frozen points all stay; the ones the refinement protects (and the
-        # other flagged points) are drawn first but thinned like the rest (28 % of the noisy
+        # sure band and frozen points all stay; the ones the refinement protects (and the
+        # rest of the band) are drawn first but thinned like the rest (28 % of the noisy
         # tray scan, see prethin). With a max_spacing guard the disk is at most a share of
         # the limit (and just that with no count to aim at), so that every thinned point
         # starts covered
@@ -604,9 +620,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
                                 frozen=n_f)
         warnings.warn(message, BudgetWarning, stacklevel=2)
     stats["n_boundary"] = int(boundary.sum())
+    stats["n_edge_band"] = int(band_u[inverse].sum())
     stats["threshold"] = threshold
     return SimplifyResult(
         keep=keep, boundary=boundary, normals=normals_u[inverse], rank=rank,
         importance=importance, deviation=deviation_u[inverse], threshold=threshold,
         order=order, order_importance=order_importance, target=target, message=message,
-        stats=stats)
+        stats=stats, band=band_u[inverse])

@@ -61,6 +61,7 @@ from .tile_refine import (
 )
 from .tile_task import (
     NORMAL_DTYPE,
+    TILE_RESULTS,
     deviation_histogram,
     simplify_tile,
     threshold_from_histogram,
@@ -883,7 +884,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     saved = {k: repr(v) if isinstance(v, float) and not math.isfinite(v) else v
              for k, v in opts.items()}
     settings = {"tile_points": int(tile_points), "halo": halo, "options": saved,
-                "version": __version__}
+                "version": __version__,
+                # what a tile's results hold (the refinement reads its ``fixed`` points)
+                "tile_results": TILE_RESULTS}
     if options.prethin_factor:  # the tiles' sequences then depend on the target: a resumed
         settings["target"] = int(target)  # run must ask for the same, thinned the same way
         settings["prethin"] = {"factor": options.prethin_factor, "scheme": prethin.SCHEME}

@@ -17,8 +17,8 @@ refines after the global cut, one task per tile, in two stages:
    and the rest as the cut left it, and runs ``refine_coverage``
    on core ∪ halo: only core points are added or removed (each tile keeps its count, so the
    global count stays exact), only core points count in its Hausdorff distance and are
-   filled for, kept halo points and the core's boundary and protected points stay
-   (:func:`~tiledsimplify.core.refine.protected`), and
+   filled for, kept halo points and the core's fixed points stay (the flags' core band and the
+   protected points, :func:`~tiledsimplify.core.refine.protected`, as in the untiled core), and
    removed halo points are *watched*: a round at level ``τ`` leaves none farther than
    ``max(τ, its distance before)``.
 
@@ -193,9 +193,7 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, after=()):
     xyz, keep, n_core = _view(store, tile, cut, earlier, width)
     info = {"swaps": 0, "hausdorff_before": 0.0, "hausdorff_after": 0.0}
     fixed = np.ones(len(xyz), dtype=bool)
-    fixed[:n_core] = store.read_result(tile, "boundary")
-    if "protected" in store.result_names(tile):
-        fixed[:n_core] |= store.read_result(tile, "protected")
+    fixed[:n_core] = store.read_result(tile, "fixed")
     core_keep = keep[:n_core]
     if n_core:
         addable = np.zeros(len(xyz), dtype=bool)
