@@ -1,9 +1,10 @@
 """How far the kept edge flags alone bound the Hausdorff distance (README "What this shows").
 
-Kept flagged points stay (up to ``edge_share`` of the count, flagged points are sure of being
-kept, and the refinement never swaps a kept one out), so the rest of the budget must cover the
-smooth surface. For each case: the default call's Hausdorff distance (input to kept points),
-that of a farthest point sample of the same count *grown from our kept flagged points* (greedy
+Kept points of the flags' core band stay (``SimplifyResult.band``: up to ``edge_share`` of the
+count they are sure of being kept, and the refinement never swaps a kept one out), so the rest
+of the budget must cover the smooth surface. For each case: the default call's Hausdorff
+distance (input to kept points), that of a farthest point sample of the same count *grown from
+our kept band points* (greedy
 k-centre with them as first centres: what a covering of the rest could reach, within the
 greedy's factor), the same grown from those and the kept points the gap refinement may not swap out
 (:func:`tiledsimplify.core.refine.protected`: boundary measure above 3x the threshold), and
@@ -52,8 +53,8 @@ def main(argv=None):
                    help="comma-separated case names of benchmarks/quality.py")
     args = p.parse_args(argv)
     fps = PEERS["farthest point (fpsample)"][0]
-    print("| case | kept | flagged, kept | protected, kept | Hausdorff: ours | grown from our flags | "
-          "grown from flags + protected | farthest point (fpsample) | ours / grown from flags | "
+    print("| case | kept | band, kept | protected, kept | Hausdorff: ours | grown from our band | "
+          "grown from band + protected | farthest point (fpsample) | ours / grown from band | "
           "ours / fpsample |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name in args.cases.split(","):
@@ -61,7 +62,7 @@ def main(argv=None):
         X = case.X
         target = round(case.ratio * len(X))
         res = simplify_points(X, count=target)
-        flags = res.boundary & res.keep  # with edge_share, not every flagged point
+        flags = res.band & res.keep  # with edge_share, not every point of the band
         fixed = flags | (protected(res.deviation, res.threshold) & res.keep)
         h = {"ours": metrics.hausdorff_distance(X, res.keep),
              "grown": metrics.hausdorff_distance(X, grown_from(X, flags, target)),

@@ -149,10 +149,11 @@ def _resolve(original, result_xyz, cols):
         boundary = np.zeros(n, bool)
         boundary[idx[np.asarray(flags).astype(bool)]] = True
         if len(result_xyz) < n:  # flagged points the count did not keep are not in the file
-            notes.append("sharp_edge flags are the kept points' only: where more points were "
-                         "flagged than the count has room for (edge_share), the others are not "
-                         "in the result, and boundary recall counts the kept ones; "
-                         "`tiledsimplify simplify --all-points` writes every point's flag.")
+            notes.append("sharp_edge flags are the kept points' only: flagged points the "
+                         "count did not keep (beyond the band nearest each edge line, or "
+                         "beyond edge_share of the count) are not in the result, and boundary "
+                         "recall counts the kept ones; `tiledsimplify simplify --all-points` "
+                         "writes every point's flag.")
     return keep, original[keep], boundary, notes
 
 
