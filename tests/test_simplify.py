@@ -347,8 +347,10 @@ def test_bunny_at_paper_ratio(data_dir):
     assert len(X) == 35947
     res = simplify_points(X, ratio=0.1)
     assert res.reached and res.keep.sum() == 3595
-    assert res.keep[res.band].all()
+    # the flags (1,768) are more than 0.4 of the count: that many are sure (an even sample;
+    # the gap refinement may trade those beyond the band)
     assert 0 < res.band.sum() <= res.boundary.sum() < res.target
+    assert 0.35 * res.target <= res.stats["n_edge_sure"] <= 0.4 * res.target
     # loose regression guard: the paper's rule opens holes (Eq. (1) is ~0 on flat patches;
     # issue 5), but every input point stays within 15 % of the diagonal of a kept point
     from scipy.spatial import cKDTree

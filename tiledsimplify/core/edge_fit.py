@@ -29,12 +29,13 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    another, farther edge) is located by the line of a flagged neighbour on a sharp edge
    (:func:`borrow`).
 4. **The whole band** — steps 2-3 give the **core band**: the points nearest each fitted line,
-   the ones a simplification keeps for certain (up to ``edge_share``), narrower beside soft
-   edges and for borrowed lines, because every point in it is budget taken from the faces.
-   The flags reported (``SimplifyResult.boundary``, the ``sharp_edge`` dimension) add every
-   point within ``width`` spacings of the line of a sharp fitted neighbour
-   (:func:`line_distances`), candidate or not: a point one spacing from a 50° fold deviates
-   too little to be a candidate.
+   narrower beside soft edges and for borrowed lines (tuned when every flagged point was kept:
+   each is budget taken from the faces); a simplification samples it first for the points
+   kept for certain, and its refinement never swaps them out. The flags
+   (``SimplifyResult.boundary``, the ``sharp_edge`` dimension) add every point within
+   ``width`` spacings of the line of a sharp fitted neighbour (:func:`line_distances`),
+   candidate or not: a point one spacing from a 50° fold deviates too little to be a
+   candidate.
 
 So flags are the points "on or within about one spacing of a sharp edge" — the ground truth of
 DESIGN.md §4 — whatever the noise and the scan-line anisotropy.
@@ -568,7 +569,7 @@ def line_distances(X, dn, dn_cnt, fitted, angle, line, local, width, spacing, ou
     0.462 -> 0.598 on the scans (plate_holes 0.529 -> 0.839, the tray 0.221 -> 0.477). In units
     of the local spacing alone the scans gained half as much (0.539); lenders of 40-60° folds
     took plate_holes to 0.547 (fillets); within 0.85 widths, not 1, the even parts' mean is
-    0.577. The kept points do not change: these flags are reported, not kept for certain.
+    0.577.
     """
     n = X.shape[0]
     mark = np.zeros(n, dtype=np.int64)

@@ -38,8 +38,7 @@ REACH = 12.0
 #: every peer on one scan more; the Bunny 17.16 -> 17.12, Hausdorff 140.8 -> 139.7. 1.5: edge
 #: coverage another -0.6 %, mean error +0.2 %, 8 % faster
 PRETHIN = 2.0
-#: mode "coverage": default ``edge_share``, the most of the count the flags' core band is sure
-#: of.
+#: mode "coverage": default ``edge_share``, the most of the count flagged points are sure of.
 #: Measured 2026-12-05 on the 39 quality cases (``benchmarks/quality.py``, ours only, against
 #: no limit): at 0.5 four even CAD parts change (their flags are 0.50-0.88 of the count), mean
 #: surface error and Hausdorff lower on all four (octagonal_pocket 34.0 -> 21.9, below every
@@ -166,15 +165,15 @@ class SimplifyOptions:
         above the subset's (:meth:`SimplifyResult.keep_at`) come from
         the sample, not the greedy.
     edge_share : float or None
-        ``"coverage"``: the most of the requested count that the core band of flagged
-        (sharp-edge) points (:attr:`SimplifyResult.band`) is sure of. Where the band holds
-        more, that many are kept for certain — an even sample along the edges, the points
-        nearest their fitted edge line first
+        ``"coverage"``: the most of the requested count that flagged (sharp-edge) points are
+        sure of. Where more are flagged, that many are kept for certain — an even sample
+        along the edges, the points of the core band (:attr:`SimplifyResult.band`) nearest
+        their fitted edge line first, of the band alone where it holds more than that
         (:func:`tiledsimplify.core.prethin.edge_sample`) — and the rest stay flagged but
-        compete with the rest of the cloud, as the flagged points beyond the band always do. At small targets the flags alone would otherwise
+        compete with the rest of the cloud. At small targets the flags alone would otherwise
         take the whole count and leave the faces empty (Fandisk at 5 %: 1,524 flags for a
         count of 824, all kept: mean surface error 10x the best peer's). A value in (0, 1], or
-        ``inf``: the whole band kept whatever the count (as until 2026-12-05; the count
+        ``inf``: every flagged point kept whatever the count (as until 2026-12-05; the count
         may then be missed). None: the mode's default (``"coverage"``: :data:`EDGE_SHARE`,
         0.4; ``"paper"``: ``inf``, as published). A tiled run applies it to each tile's share
         of the count (as the pre-thinning does). The share is of the count asked:
@@ -293,7 +292,7 @@ class SimplifyOptions:
 
     @property
     def edge_share_value(self):
-        """The share of the count the flags' core band is sure of: the option, else the mode's."""
+        """The share of the count flagged points are sure of: the option, else the mode's."""
         if self.edge_share is not None:
             return float(self.edge_share)
         return float("inf") if self.mode == "paper" else EDGE_SHARE

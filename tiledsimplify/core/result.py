@@ -14,17 +14,19 @@ class SimplifyResult:
     Attributes
     ----------
     keep : bool (n,)
-        Points kept at the requested count (frozen points always are, the ``band`` up to
-        ``options.edge_share`` of it).
+        Points kept at the requested count (frozen points always are; flagged points are sure
+        of up to ``options.edge_share`` of it).
     boundary : bool (n,)
-        Points flagged on or near a sharp edge: within about one spacing of it.
+        Points flagged on or near a sharp edge: within about one spacing of it. Up to
+        ``options.edge_share`` of the count they are sure of being kept (never removed by the
+        greedy): all of them if they fit, else an even sample along the edges — of the
+        ``band`` alone where the band does not fit. The others compete with the rest.
     band : bool (n,)
         The flagged points nearest each edge line (mode ``"coverage"``: within
         ``options.edge_width`` local spacings of a fitted or borrowed line, 0.7 of that beside
-        a soft edge; mode ``"paper"``: every flagged point): the ones kept for certain up to
-        ``options.edge_share`` of the count, and never swapped out by the gap refinement
-        once kept (:mod:`tiledsimplify.core.edge_fit`, step 4). The other flagged points
-        compete with the rest.
+        a soft edge; mode ``"paper"``: every flagged point): sampled first for the sure
+        points, and never swapped out by the gap refinement once kept (the other flagged
+        points may be, sure or not; :mod:`tiledsimplify.core.edge_fit`, step 4).
     normals : float64 (n, 3)
         Unit normals of the input points (estimated on the full input).
     rank : int64 (n,)

@@ -172,8 +172,8 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     """Paper step 3: ``(deviation, core band, flags, threshold)`` as the options' mode says.
 
     ``flags`` are the points reported on or near a sharp edge; the ``core band`` (a subset)
-    the ones a simplification keeps for certain (up to ``edge_share``) and the refinement
-    never swaps out. ``distance_out`` (optional, length m): filled in mode ``"coverage"`` with
+    the ones nearest each edge line, sampled first for the points kept for certain (up to
+    ``edge_share``), which the refinement never swaps out. ``distance_out`` (optional, length m): filled in mode ``"coverage"`` with
     each point's distance to its fitted (or borrowed) edge line in local spacings (``inf``:
     none), what :func:`.prethin.edge_sample` orders by; ``inf`` everywhere in mode ``"paper"``.
     ``spacing``: the cloud's point spacing (:func:`.edge_fit.line_distances`; None: measured).
@@ -356,9 +356,9 @@ def _warn_lost_neighbours(Xu, D, options, spacing, degree, lonely):
 
 def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, state=None,
                     prethin_target=None, covered=None):
-    """Simplify a point cloud, flagging every point on or near a sharp edge and keeping the
-    ones nearest each edge line (up to ``options.edge_share`` of the count; beyond it an even
-    sample along the edges).
+    """Simplify a point cloud, flagging every point on or near a sharp edge and keeping them
+    (up to ``options.edge_share`` of the count; beyond it an even sample along the edges, the
+    points nearest each edge line first).
 
     Parameters
     ----------
@@ -397,8 +397,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     SimplifyResult
         ``keep``, ``boundary``, ``normals``, ``rank``, ``importance`` and the full progressive
         order (see :class:`SimplifyResult`). If the points sure of being kept (frozen ones, and
-        the band of flagged ones nearest each edge line up to ``options.edge_share`` of the
-        count) exceed the target, all of them
+        flagged ones up to ``options.edge_share`` of the count) exceed the target, all of them
         are kept, ``res.reached`` is False, ``res.message`` says why, and a
         :class:`~tiledsimplify.errors.BudgetWarning` is issued.
 
@@ -470,8 +469,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
                           float((st.cnt == 0).mean()) if m else 0.0)
     lap("neighbours_normals")
     edge_distance = np.empty(m)
-    # ``band_u``: the flagged points nearest the edge lines, the ones kept for certain (up to
-    # edge_share) and never swapped out; ``flags_u`` every point reported on or near an edge
+    # ``flags_u``: every point on or near an edge; ``band_u`` the ones nearest the edge lines,
+    # sampled first for the sure points and never swapped out by the refinement
     deviation_u, band_u, flags_u, threshold = boundary_flags(Xu, st, options, edge_distance,
                                                              spacing)
     lap("boundary")
@@ -482,14 +481,17 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         stats["spacing"] = float(spacing)
 
     tie = coordinate_hash(X[rep])
-    # beyond the paper: the band's points sure of being kept, at most ``edge_share`` of the
+    # beyond the paper: the flagged points sure of being kept, at most ``edge_share`` of the
     # count (of the tile's share of the global one in a tiled run, as every pass over it
-    # asks); the other flagged points stay flagged but compete with the rest
-    anchor_u = band_u
+    # asks): all of them if they fit; else an even sample of them, the band's points nearest
+    # their line first — of the band alone where the band does not fit. The other flagged
+    # points stay flagged but compete with the rest
+    anchor_u = flags_u
     share = options.edge_share_value
-    if math.isfinite(share) and not by_guard and band_u.any():
+    if math.isfinite(share) and not by_guard and flags_u.any():
         goal = math.floor(share * (target if prethin_target is None else prethin_target))
-        anchor_u = prethin_mod.edge_sample(Xu, st.start, st.cnt, st.pool, band_u,
+        anchor_u = prethin_mod.edge_sample(Xu, st.start, st.cnt, st.pool,
+                                           band_u if band_u.sum() > goal else flags_u,
                                            edge_distance, tie, goal,
                                            spacing if spacing is not None
                                            else median_spacing(Xu))
@@ -505,8 +507,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     n_remove = n - target
     to_target = max(0, n_remove - dup_order.size)
     normals_u = st.initial_normals
-    # never swapped out by the refinement (a point of the band the cut kept stays, sure or not)
-    fixed_u = never_u | band_u | protected(deviation_u, threshold)
+    # never swapped out by the refinement: a point of the band the cut kept stays, sure or not;
+    # the other flagged points may go, sure or not
+    fixed_u = frozen[rep] | band_u | protected(deviation_u, threshold)
 
     # 4b. beyond the paper: thin the smooth points to a multiple of the target first
     thinned = np.zeros(0, dtype=np.int64)
