@@ -567,9 +567,9 @@ def line_distances(X, dn, dn_cnt, fitted, angle, line, local, width, spacing, ou
     geometric mean 0.512 -> 0.589 on the even parts (idler_riser 0.747 -> 0.872, rocker-arm
     0.533 -> 0.633, counter 0.462 -> 0.556; Fandisk 0.944 -> 0.943, block 0.936 -> 0.932) and
     0.462 -> 0.598 on the scans (plate_holes 0.529 -> 0.839, the tray 0.221 -> 0.477). In units
-    of the local spacing alone the scans gained half as much (0.539); lenders of 40-60° folds
-    took plate_holes to 0.547 (fillets); within 0.85 widths, not 1, the even parts' mean is
-    0.577.
+    of the local spacing alone the scans gained less than half as much (0.526); lenders of
+    40-60° folds took plate_holes to 0.539 (fillets); within 0.85 widths, not 1, the even
+    parts' mean is 0.577.
     """
     n = X.shape[0]
     mark = np.zeros(n, dtype=np.int64)

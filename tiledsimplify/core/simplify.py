@@ -173,9 +173,10 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
 
     ``flags`` are the points reported on or near a sharp edge; the ``core band`` (a subset)
     the ones nearest each edge line, sampled first for the points kept for certain (up to
-    ``edge_share``), which the refinement never swaps out. ``distance_out`` (optional, length m): filled in mode ``"coverage"`` with
-    each point's distance to its fitted (or borrowed) edge line in local spacings (``inf``:
-    none), what :func:`.prethin.edge_sample` orders by; ``inf`` everywhere in mode ``"paper"``.
+    ``edge_share``), which the refinement never swaps out. ``distance_out`` (optional, length
+    m): filled in mode ``"coverage"`` with each point's distance to its fitted (or borrowed)
+    edge line in local spacings (``inf``: none), what :func:`.prethin.edge_sample` orders by;
+    ``inf`` everywhere in mode ``"paper"``.
     ``spacing``: the cloud's point spacing (:func:`.edge_fit.line_distances`; None: measured).
 
     ``"paper"``: the one-ring measure with the automatic threshold (§3.1); band and flags are
