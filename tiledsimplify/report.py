@@ -150,10 +150,11 @@ def _resolve(original, result_xyz, cols):
         boundary[idx[np.asarray(flags).astype(bool)]] = True
         if len(result_xyz) < n:  # flagged points the count did not keep are not in the file
             notes.append("sharp_edge flags are the kept points' only: flagged points the "
-                         "count did not keep (beyond the band nearest each edge line, or "
-                         "beyond edge_share of the count) are not in the result, and boundary "
-                         "recall counts the kept ones; `tiledsimplify simplify --all-points` "
-                         "writes every point's flag.")
+                         "count did not keep (where the flags are more than edge_share of the "
+                         "count, or those off the edge line that the gap refinement traded "
+                         "for fills) are not in the result, and boundary recall counts the "
+                         "kept ones; `tiledsimplify simplify --all-points` writes every "
+                         "point's flag.")
     return keep, original[keep], boundary, notes
 
 
