@@ -1,12 +1,12 @@
 """How far the kept edge flags alone bound the Hausdorff distance (README "What this shows").
 
-Kept points of the flags' core band stay (``SimplifyResult.band``: up to ``edge_share`` of the
-count they are sure of being kept, and the refinement never swaps a kept one out), so the rest
-of the budget must cover the smooth surface. For each case: the default call's Hausdorff
-distance (input to kept points), that of a farthest point sample of the same count *grown from
-our kept band points* (greedy
-k-centre with them as first centres: what a covering of the rest could reach, within the
-greedy's factor), the same grown from those and the kept points the gap refinement may not swap out
+Kept points of the flags' core band stay (``SimplifyResult.band``: drawn first for the points
+sure of being kept, and the refinement never swaps a kept one out), so the rest of the budget
+must cover the smooth surface. For each case: the default call's Hausdorff distance (input to
+kept points), that of a farthest point sample of the same count *grown from our kept band
+points* (greedy k-centre with them as first centres: what a covering of the rest could reach,
+within the greedy's factor), the same grown from those and the kept points the gap refinement
+may not swap out
 (:func:`tiledsimplify.core.refine.protected`: boundary measure above 3x the threshold), and
 farthest point sampling from scratch (fpsample, the quality benchmark's best peer on
 Hausdorff). When ours is close to a grown sample, the gap to farthest point sampling is what

@@ -243,8 +243,8 @@ def test_boundary_found_on_a_noisy_line_scan(data_dir, noise):
     """Scan lines leave three to five one-ring neighbours, whose normals seed the two-plane
     fit badly; the sweep seed recovers the edge (before it: F1 0.60 / 0.58, with it 0.67 /
     0.66), points whose fit still fails borrow a neighbour's edge (0.73 / 0.71), and the flags
-    reach one spacing from a sharp line, not only its core band (0.746 / 0.759; the band, kept
-    for certain, 0.737 / 0.735 at precision 0.77)."""
+    reach one spacing from a sharp line, not only its core band (0.746 / 0.759; the band
+    nearest the line 0.737 / 0.735 at precision 0.77)."""
     V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
     s = synthetic.spacing(synthetic.scan(V, F, n_points=12000, seed=0)[0])
     X, _ = synthetic.scan(V, F, n_points=12000, noise=noise * s, seed=0)
@@ -389,7 +389,7 @@ def test_boundary_is_thin_on_fandisk(data_dir, noise):
     # 0.933 / 0.893 (the core band alone 0.932 / 0.901; 0.91 / 0.88 before borrowed edges)
     assert bd["f1"] >= 0.88, bd
     # thin: about as many flags as points within one spacing of an edge, unlike the paper's;
-    # the band kept for certain thinner still (1,311 / 1,333 of 1,378 / 1,365; 1,478 / 1,583)
+    # the band nearest the lines thinner still (1,311 / 1,333 of 1,378 / 1,365; 1,478 / 1,583)
     assert res.band.sum() < 1.1 * bd["n_positive"] and res.boundary.sum() < 1.2 * bd[
         "n_positive"], bd
     paper = simplify_points(X, ratio=0.2, options=SimplifyOptions(mode="paper",

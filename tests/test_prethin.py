@@ -94,8 +94,8 @@ def test_subset_draws_first_points_first_block_by_block(block, monkeypatch):
 
 
 def test_protected_points_are_thinned_boundary_points_are_not():
-    """The points the refinement protects may be thinned (a noisy scan has many); the flags'
-    core band (kept for certain) never is."""
+    """The points the refinement protects may be thinned (a noisy scan has many); the flags
+    sure of being kept (here the whole band: it fits the share) never are."""
     X = _plane(8000, seed=12, noise=0.004)
     X[:, 2] += np.where(X[:, 0] > 0, X[:, 0], 0.0)  # a crease along x = 0
     res = simplify_points(X, 0.1)

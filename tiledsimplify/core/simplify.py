@@ -491,11 +491,11 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     share = options.edge_share_value
     if math.isfinite(share) and not by_guard and flags_u.any():
         goal = math.floor(share * (target if prethin_target is None else prethin_target))
+        if spacing is None:  # mode "paper" (not measured yet): once, for the pre-thinning too
+            spacing = median_spacing(Xu)
         anchor_u = prethin_mod.edge_sample(Xu, st.start, st.cnt, st.pool,
                                            band_u if band_u.sum() > goal else flags_u,
-                                           edge_distance, tie, goal,
-                                           spacing if spacing is not None
-                                           else median_spacing(Xu))
+                                           edge_distance, tie, goal, spacing)
     stats["n_edge_sure"] = int(anchor_u.sum())
 
     # 5. progressive removal: duplicate copies first (importance 0), then the greedy sequence
@@ -623,11 +623,12 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         message = short_message(target, n, n - order.size, n - cut, n_b, n_g, options.guard,
                                 frozen=n_f)
         warnings.warn(message, BudgetWarning, stacklevel=2)
+    band = band_u[inverse]
     stats["n_boundary"] = int(boundary.sum())
-    stats["n_edge_band"] = int(band_u[inverse].sum())
+    stats["n_edge_band"] = int(band.sum())
     stats["threshold"] = threshold
     return SimplifyResult(
         keep=keep, boundary=boundary, normals=normals_u[inverse], rank=rank,
         importance=importance, deviation=deviation_u[inverse], threshold=threshold,
         order=order, order_importance=order_importance, target=target, message=message,
-        stats=stats, band=band_u[inverse])
+        stats=stats, band=band)
