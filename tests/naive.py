@@ -181,10 +181,12 @@ def coverage_importance(X, normals, boundary, p, dn, weight):
     return e + weight * rho2
 
 
-def thin_below(X, cand, removable, tie, level, n_remove):
+def thin_below(X, cand, removable, tie, level, n_remove, scale=None):
     """Gap thinning (:func:`tiledsimplify.core.refine.thin_below`) by brute force: remove the
     removable candidate whose removal leaves the farthest input point nearest to it the least
-    far from the other remaining candidates, while that is within ``level``; ties by ``tie``."""
+    far from the other remaining candidates, while that is within ``level``; ties by ``tie``.
+    ``scale`` (per input point, default 1): each point's distance counts that many times."""
+    scale = np.ones(len(X)) if scale is None else np.asarray(scale, dtype=np.float64)
     alive = np.ones(len(cand), dtype=bool)
     D = np.linalg.norm(X[:, None, :] - X[cand][None, :, :], axis=2)  # input x candidate
     removed = []
@@ -195,7 +197,8 @@ def thin_below(X, cand, removable, tie, level, n_remove):
         for c in np.flatnonzero(alive & removable):
             others = live[live != c]
             mine = own == c
-            gap = D[np.ix_(mine, others)].min(axis=1).max() if mine.any() else 0.0
+            gap = ((D[np.ix_(mine, others)].min(axis=1) * scale[mine]).max() if mine.any()
+                   else 0.0)
             if best is None or (gap, tie[c]) < (best[0], tie[best[1]]):
                 best = (gap, c)
         if best is None or not best[0] <= level:
@@ -205,10 +208,11 @@ def thin_below(X, cand, removable, tie, level, n_remove):
     return np.array(removed, dtype=np.int64)
 
 
-def thin_lists(nbr, nd, removable, tie, level, n_remove):
+def thin_lists(nbr, nd, removable, tie, level, n_remove, scale=None):
     """Gap thinning on given candidate lists (``nbr``/``nd`` as
     :func:`tiledsimplify.core.refine.thin_below` takes them, id ``m`` = none) by recomputing
     every owner and every gap from scratch at each step. Returns ``(removed, dist)``."""
+    scale = np.ones(len(nbr)) if scale is None else np.asarray(scale, dtype=np.float64)
     m = len(removable)
     alive = np.ones(m + 1, dtype=bool)
     alive[m] = False
@@ -229,7 +233,7 @@ def thin_lists(nbr, nd, removable, tie, level, n_remove):
             for x in range(len(nbr)):
                 if own[x] >= 0 and nbr[x, own[x]] == c:
                     j = first(x, own[x] + 1)
-                    gaps.append(nd[x, j] if j >= 0 else np.inf)
+                    gaps.append(nd[x, j] * scale[x] if j >= 0 else np.inf)
             if best is None or (max(gaps), tie[c], c) < best:
                 best = (max(gaps), tie[c], c)
         if best is None or not best[0] <= level:
@@ -260,13 +264,30 @@ def exact_order(Q, C, tie, k):
     return order, np.take_along_axis(s, order, axis=1)
 
 
+def _fill_dense(X, trial, level):
+    """Farthest first by ``np.argmax``, every addition lowering every distance."""
+    added = []
+    while True:
+        x = int(np.argmax(trial))
+        if not trial[x] > level:
+            break
+        added.append(x)
+        e = X - X[x]
+        trial = np.minimum(trial, np.sqrt(e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1]
+                                          + e[:, 2] * e[:, 2]))
+        trial[x] = 0.0
+    return np.asarray(added, dtype=np.int64)
+
+
 def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=0.05,
-                    min_step=0.002, max_rounds=60, k=16):
+                    min_step=0.002, max_rounds=60, k=16, edges=None, edge_radius=0.0):
     """:func:`tiledsimplify.core.refine.refine_coverage` by brute force: per round a fill that
-    lowers every distance, and every input point's candidates sorted by (distance, tie)."""
+    lowers every distance, and every input point's candidates sorted by (distance, tie); the
+    flags' cover (``edges``) as a fill of the flags alone, then a cap on their rows."""
     from tiledsimplify.core.refine import inputs, thin_below
     X, keep, fixed, addable, ignored, watched, tie = inputs(X, keep, fixed, addable, watch, tie)
-    info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0}
+    info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0,
+            "edge_swaps": 0}
     if not (keep & ~fixed).any() or not (addable & ~keep).any():
         return keep, info
     dist, _ = cKDTree(X[keep]).query(X)
@@ -274,22 +295,9 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
     H = float(dist[~watched].max())
     info["hausdorff_before"] = H
     counted = np.flatnonzero(~ignored)
-    while info["rounds"] < max_rounds and step >= min_step and H > 0:
-        info["rounds"] += 1
-        level = (1.0 - step) * H
-        trial = dist.copy()
-        trial[watched] = 0.0
-        added = []
-        while True:  # fill, farthest first
-            x = int(np.argmax(trial))
-            if not trial[x] > level:
-                break
-            added.append(x)
-            e = X - X[x]
-            trial = np.minimum(trial, np.sqrt(e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1]
-                                              + e[:, 2] * e[:, 2]))
-            trial[x] = 0.0
-        added = np.asarray(added, dtype=np.int64)
+    cap = np.full(len(X), np.inf)
+
+    def swap(added, level):  # the swap at ``level``: the new distances, or None
         cand = np.concatenate([np.flatnonzero(keep), added])
         removable = ~fixed[cand]
         removable[cand.size - added.size:] = False
@@ -305,15 +313,44 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         inside = s[at] < level * level
         nd = np.where(inside, np.sqrt(s[at]), np.inf)
         nbr = np.where(inside, order[at], cand.size)
+        scale = np.ones(rows.size)
+        tight = cap[rows] < level
+        scale[tight] = level / cap[rows][tight]
         gone, d_rows = thin_below(*lists_from_dense(nd, nbr, cand.size), removable, cand_tie,
-                                  level, added.size)
+                                  level, added.size, scale)
         if gone.size < added.size:
-            step *= 0.5
-            continue
+            return None
         keep[added] = True
         keep[cand[gone]] = False
-        info["swaps"] += int(added.size)
         d1[rows] = d_rows
+        return d1
+
+    if edges is not None and edge_radius > 0:
+        edges = np.asarray(edges, dtype=bool)
+        cap[edges] = edge_radius
+        added = _fill_dense(X, np.where(edges & addable & ~keep, dist, 0.0), edge_radius)
+        while added.size:
+            d1 = swap(added, H)
+            if d1 is not None:
+                fixed = fixed.copy()
+                fixed[added] = True
+                info["edge_swaps"] = int(added.size)
+                info["swaps"] += int(added.size)
+                dist = d1
+                H = float(dist[~watched].max())
+                break
+            added = added[:added.size // 2]
+    while info["rounds"] < max_rounds and step >= min_step and H > 0:
+        info["rounds"] += 1
+        level = (1.0 - step) * H
+        trial = dist.copy()
+        trial[watched] = 0.0
+        added = _fill_dense(X, trial, level)
+        d1 = swap(added, level)
+        if d1 is None:
+            step *= 0.5
+            continue
+        info["swaps"] += int(added.size)
         dist = d1
         H = float(dist[~watched].max())
     info["hausdorff_after"] = H

@@ -161,6 +161,29 @@ def test_refine_coverage_of_a_tile_equals_brute_force(name, X):
         assert info["swaps"] > 0
 
 
+def _edges(X):
+    """A band of flags across the cloud (as sharp-edge flags lie along a line) and a cover
+    radius below the kept points' gaps."""
+    y = X[:, 1]
+    band = np.abs(y - np.median(y)) < 0.03 * np.ptp(y)
+    return band, 2.5 * float(np.median(cKDTree(X).query(X, 2)[0][:, 1]))
+
+
+@pytest.mark.parametrize("name,X", list(_clouds()), ids=lambda v: v if isinstance(v, str) else "")
+def test_refine_coverage_with_an_edge_cover_equals_brute_force(name, X):
+    keep, fixed = _keeps(X, 3)
+    edges, radius = _edges(X)
+    other = X[:, 0] > np.quantile(X[:, 0], 0.7)
+    for kw in ({}, {"addable": ~other, "watch": other}):
+        f = fixed | other if kw else fixed
+        got, info = refine_coverage(X, keep, f, edges=edges, edge_radius=radius, **kw)
+        expect, expect_info = naive.refine_coverage(X, keep, f, edges=edges,
+                                                    edge_radius=radius, **kw)
+        assert np.array_equal(got, expect)
+        assert info == expect_info
+        assert info["edge_swaps"] > 0
+
+
 def test_refine_coverage_with_coarse_cells_asks_the_exact_search_and_equals_brute_force(monkeypatch):
     from tiledsimplify.core import refine
     X = list(_clouds())[3][1]
@@ -192,6 +215,9 @@ def test_refine_coverage_on_small_odd_clouds_equals_brute_force(seed):
         keep = rng.random(len(X)) < rng.uniform(0.05, 0.6)
         fixed = keep & (rng.random(len(X)) < 0.3)
         kw = {"k": int(rng.choice([1, 2, 3, 16]))}
+        if trial % 2 == 0:
+            kw.update(edges=rng.random(len(X)) < 0.2,
+                      edge_radius=float(rng.uniform(0.05, 0.3)))
         if trial % 3 == 0:
             other = X[:, 0] > np.quantile(X[:, 0], 0.6)
             fixed = fixed | other

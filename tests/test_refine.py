@@ -40,7 +40,7 @@ def test_thin_below_matches_naive(seed):
     d1 = nd[:, 0]
     for level in (np.quantile(d1, 0.9) * 1.5, np.max(d1) * 3):
         lists = naive.lists_from_dense(nd, nbr, cand.size)
-        gone, dist = thin_below(*lists, removable, tie, level, 30)
+        gone, dist = thin_below(*lists, removable, tie, level, 30, np.ones(len(X)))
         expect = naive.thin_below(X, cand, removable, tie, level, 30)
         assert gone.tolist() == expect.tolist()
         alive = np.ones(cand.size, bool)
@@ -64,7 +64,7 @@ def test_thin_below_on_short_lists_matches_recomputing_every_step(seed):
         nbr = np.ascontiguousarray(nbr, dtype=np.int64)
         for level in (np.quantile(d1, 0.9), 2 * d1.max()):
             lists = naive.lists_from_dense(nd, nbr, 60)
-            gone, dist = thin_below(*lists, removable, tie, level, 40)
+            gone, dist = thin_below(*lists, removable, tie, level, 40, np.ones(len(X)))
             expect, expect_dist = naive.thin_lists(nbr, nd, removable, tie, level, 40)
             assert gone.tolist() == expect.tolist()
             np.testing.assert_array_equal(dist, expect_dist)
@@ -170,6 +170,60 @@ def test_watched_points_are_never_added_and_never_left_worse_than_the_level(seed
         d2 = cKDTree(X[free]).query(X[watched])[0]
         assert (d2 > np.maximum(d0, info["hausdorff_after"]) + 1e-12).any()
         assert (d1 <= np.maximum(d0, info["hausdorff_after"]) + 1e-12).all()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_thin_below_with_scaled_rows_matches_naive(seed):
+    # the flags' cap: rows whose distances count more may end only that much nearer
+    rng = np.random.default_rng(seed)
+    X = _wavy(150, seed)
+    cand = np.sort(rng.choice(150, 50, replace=False))
+    removable = rng.random(50) < 0.7
+    tie = coordinate_hash(X[cand])
+    scale = np.where(rng.random(150) < 0.3, rng.uniform(1.0, 3.0, 150), 1.0)
+    nd, nbr = cKDTree(X[cand]).query(X, k=cand.size)
+    level = np.quantile(nd[:, 0], 0.9) * 1.5
+    gone, dist = thin_below(*naive.lists_from_dense(nd, nbr, cand.size), removable, tie, level,
+                            30, scale)
+    expect = naive.thin_below(X, cand, removable, tie, level, 30, scale)
+    assert gone.tolist() == expect.tolist()
+    assert (dist * scale).max() <= max(level, (nd[:, 0] * scale).max())
+    plain, _ = thin_below(*naive.lists_from_dense(nd, nbr, cand.size), removable, tie, level,
+                          30, np.ones(150))
+    assert plain.size > gone.size  # the scaled rows hold points back
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_edge_cover_brings_every_flag_within_its_radius(seed):
+    rng = np.random.default_rng(seed)
+    X = _wavy(3000, seed)
+    keep = rng.random(3000) < 0.1
+    flags = np.abs(X[:, 1] - 1.5) < 0.06  # a band of flags across the surface, as an edge
+    keep[flags] &= rng.random(3000)[flags] < 0.1  # sparsely kept there
+    fixed = keep & (rng.random(3000) < 0.2)
+    spacing = float(np.median(cKDTree(X).query(X, 2)[0][:, 1]))
+    radius = 2.0 * spacing
+    before = cKDTree(X[keep]).query(X[flags])[0]
+    assert before.max() > 1.5 * radius  # the cover has work to do
+    out, info = refine_coverage(X, keep, fixed, edges=flags, edge_radius=radius)
+    assert out.sum() == keep.sum() and out[fixed].all()
+    assert cKDTree(X[out]).query(X[flags])[0].max() <= radius
+    assert info["edge_swaps"] > 0
+    assert _hausdorff(X, out) <= _hausdorff(X, keep)
+    plain, plain_info = refine_coverage(X, keep, fixed)
+    assert cKDTree(X[plain]).query(X[flags])[0].max() > radius  # without it, flags uncovered
+    # no flag, or no radius, is the refinement without the cover
+    for kw in ({"edges": np.zeros(3000, bool), "edge_radius": radius},
+               {"edges": flags, "edge_radius": 0.0}):
+        other, other_info = refine_coverage(X, keep, fixed, **kw)
+        assert np.array_equal(other, plain) and other_info == plain_info
+
+
+def test_edge_cover_radius_follows_the_count():
+    from tiledsimplify.core.refine import EDGE_COVER, EDGE_COVER_POWER, edge_cover_radius
+    assert edge_cover_radius(2.0, 0.2) == pytest.approx(2.0 * EDGE_COVER)
+    assert edge_cover_radius(2.0, 0.05) == pytest.approx(2.0 * EDGE_COVER * 4 ** EDGE_COVER_POWER)
+    assert edge_cover_radius(None, 0.2) == edge_cover_radius(2.0, 0.0) == 0.0
 
 
 def test_everything_fixed_changes_nothing():

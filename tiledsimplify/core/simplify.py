@@ -24,7 +24,7 @@ from .importance import MEASURES, all_importance, coverage_weight
 from .local_mesh import MAX_DN, all_local_meshes
 from .normals import all_normals
 from .options import SimplifyOptions
-from .refine import protected, refine_coverage
+from .refine import edge_cover_radius, protected, refine_coverage
 from .removal import GUARDS, remove_points
 from .result import SimplifyResult, resolve_target, short_message
 from .voronoi import (BOX_FACTOR, SCALE_SPACINGS, TOL_FACTOR, scale_of,
@@ -608,7 +608,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     importance = np.full(n, np.nan)
     importance[order[:cut]] = order_importance[:cut]
     if options.refines and cut == n_remove and to_target > 0:
-        keep_u, info = refine_coverage(Xu, keep[rep], fixed_u, tie=tie)
+        kept_u = m - to_target if prethin_target is None else int(prethin_target)
+        radius = edge_cover_radius(spacing, kept_u / m)
+        keep_u, info = refine_coverage(Xu, keep[rep], fixed_u, tie=tie, edges=flags_u,
+                                       edge_radius=radius)
         rank, importance = _swap(keep, rank, importance, rep, keep_u, order, order_importance,
                                  cut)
         stats.update({f"refine_{key}": value for key, value in info.items()})
