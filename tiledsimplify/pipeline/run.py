@@ -35,6 +35,7 @@ from dask.callbacks import Callback
 
 from .. import __version__, machine
 from ..core import SimplifyOptions, compile_cache, edge_fit, prethin
+from ..core.refine import edge_cover_radius
 from ..core.result import resolve_target, short_message
 from ..errors import InputError, TiledSimplifyError
 from ..io import points_out
@@ -1037,7 +1038,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         stage("budget")
         refined = False
         if options.refines and target > 0 and 0 < n_removed == n - target:  # something to swap
-            refined = _refine(ts, store_path, prefix, scheduler, workers, client, progress)
+            radius = edge_cover_radius(opts.get("spacing"), target / n)
+            refined = _refine(ts, store_path, prefix, scheduler, workers, client, progress,
+                              radius)
         stage("refine")
         n_out, n_boundary = _write_output(ts, source, output, prefix, refined, client)
         stage("output")
@@ -1081,7 +1084,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     return summary
 
 
-def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
+def _refine(ts, store_path, prefix, scheduler, workers, client, progress, edge_radius):
     """The gap refinement stage (:mod:`.tile_refine`); True if the tiles were refined.
 
     One task per tile for the cut's Hausdorff distance ``G`` per tile (refinement needs ``G``
@@ -1090,7 +1093,8 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
     rest run in parallel, largest first (:func:`_tile_tasks`). The cut, its key and ``G`` are
     saved in the store, and each tile's refined flags with the key and ``G``, so a resumed run
     refines only the tiles still missing for this cut (flags are a fixed function of the cut,
-    so those saved stay valid).
+    so those saved stay valid). ``edge_radius``: the flags' cover
+    (:func:`~tiledsimplify.core.refine.edge_cover_radius`).
     """
     t0 = time.perf_counter()
     cut = [int(prefix[i]) for i in range(ts.n_tiles)]
@@ -1126,7 +1130,7 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress):
     n_done = len(pending)
     if pending:
         _compute(_tile_tasks(refine_tile, sorted(pending, key=lambda i: phase[i]), ts.count,
-                             lambda i: (str(store_path), i, g, earlier[i], width),
+                             lambda i: (str(store_path), i, g, earlier[i], width, edge_radius),
                              earlier.get),
                  scheduler, workers, client, progress, "refine", _refine_line,
                  points=sum(ts.count(i) for i in pending))

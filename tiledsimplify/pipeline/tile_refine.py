@@ -20,7 +20,8 @@ refines after the global cut, one task per tile, in two stages:
    filled for, kept halo points and the core's fixed points stay (the flags' core band and the
    protected points, :func:`~tiledsimplify.core.refine.protected`, as in the untiled core), and
    removed halo points are *watched*: a round at level ``τ`` leaves none farther than
-   ``max(τ, its distance before)``.
+   ``max(τ, its distance before)``. The core's flagged points are brought and kept within the
+   run's edge cover radius of a kept point, as in the untiled core.
 
 **Determinism.** A tile reads the cut and the refined flags of its neighbours of earlier
 phases, which are saved before it starts; its neighbours of later phases start only after it
@@ -56,7 +57,9 @@ from ..core.heap import coordinate_hash
 from ..core.refine import refine_coverage
 from ..tiles import IncompleteStoreError, TileStore
 
-SCHEME = "phases"  # saved with the refined flags: flags of another scheme are redone
+#: saved with the refined flags: flags of another scheme are redone ("phases" until 2026-12-05:
+#: without the flags' cover, :data:`~tiledsimplify.core.refine.EDGE_COVER`)
+SCHEME = "phases, edge cover"
 
 
 def _cut(store):
@@ -153,7 +156,8 @@ def cut_hausdorff(store_path, tile, width=None):
     return {"tile": int(tile), "hausdorff": h, "seconds": time.perf_counter() - t0}
 
 
-def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, after=()):
+def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, edge_radius=0.0,
+                after=()):
     """Refine one tile's kept core points after the global cut; save them in the store.
 
     Parameters
@@ -168,6 +172,10 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, after=()):
         be saved), the cut's for every other neighbour.
     width : float, optional
         The view's halo width, :func:`refine_width` (default: the store's halo).
+    edge_radius : float
+        The tile's flagged core points are brought and kept within this distance of a kept
+        point (:func:`~tiledsimplify.core.refine.edge_cover_radius` of the run's spacing and
+        ratio; 0: no cover), as the untiled core does.
     after : sequence, ignored
         The scheduler's handle on the tasks that refine ``earlier`` (their results), so that
         this one runs after them.
@@ -198,8 +206,11 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, after=()):
     if n_core:
         addable = np.zeros(len(xyz), dtype=bool)
         addable[:n_core] = True
+        edges = np.zeros(len(xyz), dtype=bool)
+        edges[:n_core] = store.read_result(tile, "boundary")
         refined, info = refine_coverage(xyz, keep, fixed, addable=addable, watch=~addable,
-                                        tie=coordinate_hash(xyz))
+                                        tie=coordinate_hash(xyz), edges=edges,
+                                        edge_radius=edge_radius)
         core_keep = refined[:n_core]
     store.write_refined(tile, core_keep, {"cut_key": key, "hausdorff": float(hausdorff),
                                           "scheme": SCHEME})
