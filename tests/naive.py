@@ -307,7 +307,7 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         d1[counted] = np.sqrt(s[:, 0])
         o1 = np.full(len(X), -1)
         o1[counted] = order[:, 0]
-        removable[o1[watched & (d1 > level)]] = False
+        removable[o1[(d1 >= level) & (o1 >= 0)]] = False  # at or beyond: keeps its nearest
         rows = counted[removable[order[:, 0]]]
         at = np.searchsorted(counted, rows)
         inside = s[at] < level * level

@@ -219,6 +219,22 @@ def test_edge_cover_brings_every_flag_within_its_radius(seed):
         assert np.array_equal(other, plain) and other_info == plain_info
 
 
+def test_a_point_at_the_level_keeps_its_nearest_candidate():
+    # its list (candidates nearer than the level) is empty, so no gap counts it: its nearest
+    # must stay, or a thinning at the level of the Hausdorff distance (the flags' cover) could
+    # leave it with none (2026-12-05: Autzen at 2 %, an infinite distance, 380 s)
+    from tiledsimplify.core.refine import _nearest
+    X = np.array([[0.0, 0, 0], [1.0, 0, 0], [3.0, 0, 0], [3.5, 0, 0]])
+    cand = np.array([1, 3])
+    removable = np.ones(2, dtype=bool)
+    ids = np.arange(4)
+    d1, lists, rows, at = _nearest(X, None, cand, np.zeros(2, dtype=np.uint64),
+                                   (ids, X, np.zeros(4, dtype=np.int64)), 2, 1.0, removable)
+    assert d1.tolist() == [1.0, 0.0, 0.5, 0.0]
+    assert removable.tolist() == [False, True]  # point 0 lies at the level from candidate 1
+    assert lists[0][1] == lists[0][0]  # and its list is empty
+
+
 def test_edge_cover_radius_follows_the_count():
     from tiledsimplify.core.refine import EDGE_COVER, EDGE_COVER_POWER, edge_cover_radius
     assert edge_cover_radius(2.0, 0.2) == pytest.approx(2.0 * EDGE_COVER)
