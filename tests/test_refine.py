@@ -228,7 +228,7 @@ def test_a_point_at_the_level_keeps_its_nearest_candidate():
     cand = np.array([1, 3])
     removable = np.ones(2, dtype=bool)
     ids = np.arange(4)
-    d1, lists, rows, at = _nearest(X, None, cand, np.zeros(2, dtype=np.uint64),
+    d1, lists, _, _ = _nearest(X, None, cand, np.zeros(2, dtype=np.uint64),
                                    (ids, X, np.zeros(4, dtype=np.int64)), 2, 1.0, removable)
     assert d1.tolist() == [1.0, 0.0, 0.5, 0.0]
     assert removable.tolist() == [False, True]  # point 0 lies at the level from candidate 1
@@ -236,10 +236,11 @@ def test_a_point_at_the_level_keeps_its_nearest_candidate():
 
 
 def test_edge_cover_radius_follows_the_count():
-    from tiledsimplify.core.refine import EDGE_COVER, EDGE_COVER_POWER, edge_cover_radius
-    assert edge_cover_radius(2.0, 0.2) == pytest.approx(2.0 * EDGE_COVER)
-    assert edge_cover_radius(2.0, 0.05) == pytest.approx(2.0 * EDGE_COVER * 4 ** EDGE_COVER_POWER)
-    assert edge_cover_radius(None, 0.2) == edge_cover_radius(2.0, 0.0) == 0.0
+    from tiledsimplify.core import refine
+    r = refine.edge_cover_radius
+    assert r(2.0, 0.2) == pytest.approx(2.0 * refine.EDGE_COVER)
+    assert r(2.0, 0.05) == pytest.approx(2.0 * refine.EDGE_COVER * 4 ** refine.EDGE_COVER_POWER)
+    assert r(None, 0.2) == r(2.0, 0.0) == 0.0
 
 
 def test_everything_fixed_changes_nothing():
