@@ -352,8 +352,9 @@ def test_flags_reach_one_spacing_beside_the_band(data_dir, monkeypatch, part, sc
     the core band nearest it: points a little off a 45-70° fold deviate too little to be
     candidates (idler_riser), and overlapping scan views shrink the local spacing the band is
     measured in (plate_holes). Where the band alone is more than ``edge_share`` of the count,
-    the sure points are a sample of the band, and the kept points those of a run without the
-    wider flags, bit for bit."""
+    the sure points are a sample of the band, and the greedy's kept points those of a run
+    without the wider flags, bit for bit (the refinement then keeps every flag covered, the
+    wider ones too: ``refine.EDGE_COVER``)."""
     V, F = read_mesh(data_dir / "meshes" / "trimesh_cad" / f"{part}.STL")
     seg = V[synthetic.sharp_edges(V, F)]
     if scan:
@@ -368,13 +369,15 @@ def test_flags_reach_one_spacing_beside_the_band(data_dir, monkeypatch, part, sc
     assert f1 >= least and f1_band < band_below, (f1, f1_band)
     assert (res.boundary >= res.band).all() and res.stats["n_edge_band"] == res.band.sum()
     assert res.stats["n_edge_sure"] <= min(0.4 * res.target, res.boundary.sum())
-    small = simplify_points(X, ratio=0.05)
+    small = simplify_points(X, ratio=0.05, options={"refine": False})
     assert small.band.sum() > 0.4 * small.target
+    refined = simplify_points(X, ratio=0.05)
     monkeypatch.setattr(edge_fit, "line_distances", lambda *args: None)  # the band alone
-    alone = simplify_points(X, ratio=0.05)
+    alone = simplify_points(X, ratio=0.05, options={"refine": False})
     np.testing.assert_array_equal(alone.boundary, small.band)
     for name in ("keep", "rank", "importance", "order"):
         np.testing.assert_array_equal(getattr(alone, name), getattr(small, name))
+    np.testing.assert_array_equal(refined.order, small.order)  # the refinement swaps keep only
 
 
 @pytest.mark.parametrize("noise", [0.0, 0.1])
