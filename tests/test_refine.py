@@ -29,14 +29,19 @@ def _plate(n, seed=0):
     return np.c_[np.random.default_rng(seed).random((n, 2)), np.zeros(n)]
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_thin_below_matches_naive(seed):
+def _thin_case(seed):
+    """150 points, 50 candidates (70 % removable), full candidate lists (no search cut-off)."""
     rng = np.random.default_rng(seed)
     X = _wavy(150, seed)
     cand = np.sort(rng.choice(150, 50, replace=False))
     removable = rng.random(50) < 0.7
-    tie = coordinate_hash(X[cand])
-    nd, nbr = cKDTree(X[cand]).query(X, k=cand.size)  # full lists: no search cut-off
+    nd, nbr = cKDTree(X[cand]).query(X, k=cand.size)
+    return rng, X, cand, removable, coordinate_hash(X[cand]), nd, nbr
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_thin_below_matches_naive(seed):
+    _, X, cand, removable, tie, nd, nbr = _thin_case(seed)
     d1 = nd[:, 0]
     for level in (np.quantile(d1, 0.9) * 1.5, np.max(d1) * 3):
         lists = naive.lists_from_dense(nd, nbr, cand.size)
@@ -175,13 +180,8 @@ def test_watched_points_are_never_added_and_never_left_worse_than_the_level(seed
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_thin_below_with_scaled_rows_matches_naive(seed):
     # the flags' cap: rows whose distances count more may end only that much nearer
-    rng = np.random.default_rng(seed)
-    X = _wavy(150, seed)
-    cand = np.sort(rng.choice(150, 50, replace=False))
-    removable = rng.random(50) < 0.7
-    tie = coordinate_hash(X[cand])
+    rng, X, cand, removable, tie, nd, nbr = _thin_case(seed)
     scale = np.where(rng.random(150) < 0.3, rng.uniform(1.0, 3.0, 150), 1.0)
-    nd, nbr = cKDTree(X[cand]).query(X, k=cand.size)
     level = np.quantile(nd[:, 0], 0.9) * 1.5
     gone, dist = thin_below(*naive.lists_from_dense(nd, nbr, cand.size), removable, tie, level,
                             30, scale)

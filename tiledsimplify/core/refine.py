@@ -17,6 +17,14 @@ point:
 4. If ``a`` removals were found, commit the swap and aim lower; otherwise halve ``step`` and
    try again, and stop when it falls below ``min_step`` or after ``max_rounds`` tries.
 
+**The flags' cover** (``edges``, ``edge_radius``; 2026-12-05): before the rounds, flagged
+points farther than the radius from the kept set are added (farthest first, among the flags
+alone) and as many kept points thinned at the level ``H`` itself, so ``H`` does not rise; the
+flags added stay fixed. In every round a flagged point's distance counts ``τ / radius`` times
+in the thinning (its *scale*), so no removal leaves it beyond the radius. Without it the rounds
+traded the flags outside the core band for the Hausdorff distance and opened gaps along the
+edges (:data:`EDGE_COVER`).
+
 Every committed round lowers the Hausdorff distance by at least ``min_step · H``; a failed one
 changes nothing. So the result never has a larger Hausdorff distance than the input kept set.
 
@@ -70,8 +78,8 @@ EDGE_COVER = 1.35
 #: spacing grows as ``ratio ** -0.5``; a cover that follows it (0.5) spends the count on the
 #: edges where the faces need it — on the README's eight small-ratio cases at 5 %, Hausdorff
 #: +7.4 % and 4 of 8 Hausdorff targets lost (mean error -8.8 %); 0.75: Hausdorff +1.0 % at 5
-#: % and +2.4 % at 2 %, mean error -1.3 / -3.3 %, edge coverage +2.8 / +5.5 %, no target lost;
-#: 1.0: no change below 10 %.
+#: % and +2.1 % at 2 %, mean error -1.3 / -2.9 %, edge coverage +2.8 / +5.5 %, no target lost;
+#: 1.0: almost no change below 10 %.
 EDGE_COVER_POWER = 0.75
 
 
@@ -143,6 +151,9 @@ def thin_below(start, nbr, nd, removable, tie, level, n_remove, scale):
     Each candidate's owned rows are a linked list (``head`` / ``nxt``; a row is in one list at
     a time), so a gap costs the few rows a candidate owns, not every row that lists it; the
     first gaps come from one pass over the rows.
+
+    ``scale`` (float64, one per row): a row's distances count that many times in the gaps
+    (1 for every row: the plain thinning; ``level / radius`` keeps a row within ``radius``).
 
     Returns
     -------
@@ -384,13 +395,20 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         Upper bound on rounds, committed or failed.
     k : int
         Kept points searched per input point when thinning.
+    edges : bool (n,), optional
+        Flagged points (sharp-edge flags) to bring and keep within ``edge_radius`` of a kept
+        point (the module's "flags' cover"); a flag that the fill before the rounds could not
+        bring within it (where too few kept points could go) keeps its nearest kept point.
+    edge_radius : float
+        Model units; 0 (or no ``edges``): no cover, the rounds as without it bit for bit.
 
     Returns
     -------
     keep : bool (n,)
         The refined kept set: same count, every kept ``fixed`` point still kept.
     info : dict
-        ``hausdorff_before``, ``hausdorff_after`` (model units), ``rounds``, ``swaps``.
+        ``hausdorff_before``, ``hausdorff_after`` (model units), ``rounds``, ``swaps``
+        (``edge_swaps`` of them by the cover's fill).
 
     Notes
     -----
@@ -423,13 +441,13 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
     # point, first by a fill of the flags alone at the level H, then kept so by every round
     cap = None
     if edges is not None and edge_radius > 0:
-        cap = np.where(np.asarray(edges, dtype=bool)[ids], float(edge_radius), np.inf)
-        trial = np.where(np.asarray(edges, dtype=bool) & addable & ~keep, dist, 0.0)
-        added = _fill(X, grid, tree_x, trial, edge_radius)
+        edges = np.asarray(edges, dtype=bool)
+        cap = np.where(edges[ids], float(edge_radius), np.inf)
+        added = _fill(X, grid, tree_x, np.where(edges & addable & ~keep, dist, 0.0), edge_radius)
         while added.size:  # where fewer kept points can go, the last additions are not made
             d1 = _swap(X, keep, fixed, added, H, cap, search_grid, tie, counted, k)
             if d1 is not None:
-                fixed = fixed | _mask(X.shape[0], added)  # not traded for the Hausdorff
+                fixed[added] = True  # not traded for the Hausdorff (``fixed``: inputs' copy)
                 info["edge_swaps"] = int(added.size)
                 info["swaps"] += int(added.size)
                 dist = d1
@@ -451,13 +469,6 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         H = float(dist[~watched].max())
     info["hausdorff_after"] = H
     return keep, info
-
-
-def _mask(n, ids):
-    """A bool mask of length ``n``, true at ``ids``."""
-    out = np.zeros(n, dtype=bool)
-    out[ids] = True
-    return out
 
 
 def _swap(X, keep, fixed, added, level, cap, search_grid, tie, counted, k):

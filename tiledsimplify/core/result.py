@@ -26,7 +26,9 @@ class SimplifyResult:
         ``options.edge_width`` local spacings of a fitted or borrowed line, 0.7 of that beside
         a soft edge; mode ``"paper"``: every flagged point): sampled first for the sure
         points, and never swapped out by the gap refinement once kept (the other flagged
-        points may be, sure or not; :mod:`tiledsimplify.core.edge_fit`, step 4).
+        points may be, sure or not, but each stays within the refinement's edge cover radius
+        of a kept point, :func:`tiledsimplify.core.refine.edge_cover_radius`;
+        :mod:`tiledsimplify.core.edge_fit`, step 4).
     normals : float64 (n, 3)
         Unit normals of the input points (estimated on the full input).
     rank : int64 (n,)

@@ -518,10 +518,11 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     guarded = options.guard == "max_spacing"
     covers_u = covered[rep] if guarded and covered is not None else None
     P = X[rep] if guarded else None  # the guard measures in the input's own coordinates
+    # the distinct points kept: the pre-thinned subset holds at least this many (with
+    # ``prethin_target`` the same for every count asked: the passes over one tile agree), and
+    # the refinement's edge cover grows as it shrinks
+    aim = m - to_target if prethin_target is None else int(prethin_target)
     if options.prethin_factor and (to_target > 0 or prethin_target is not None):
-        # the subset holds at least ``aim`` points; with ``prethin_target`` it is the same
-        # for every count asked (the passes over one tile agree)
-        aim = m - to_target if prethin_target is None else int(prethin_target)
         # sure band and frozen points all stay; the ones the refinement protects (and the
         # rest of the band) are drawn first but thinned like the rest (28 % of the noisy
         # tray scan, see prethin). With a max_spacing guard the disk is at most a share of
@@ -608,10 +609,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     importance = np.full(n, np.nan)
     importance[order[:cut]] = order_importance[:cut]
     if options.refines and cut == n_remove and to_target > 0:
-        kept_u = m - to_target if prethin_target is None else int(prethin_target)
-        radius = edge_cover_radius(spacing, kept_u / m)
         keep_u, info = refine_coverage(Xu, keep[rep], fixed_u, tie=tie, edges=flags_u,
-                                       edge_radius=radius)
+                                       edge_radius=edge_cover_radius(spacing, aim / m))
         rank, importance = _swap(keep, rank, importance, rep, keep_u, order, order_importance,
                                  cut)
         stats.update({f"refine_{key}": value for key, value in info.items()})
