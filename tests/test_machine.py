@@ -162,12 +162,15 @@ def test_a_run_short_of_memory_runs_fewer_workers_for_the_same_output(tmp_path, 
     for name, room in (("plenty", 10 ** 12), ("one", (run_mod.LOCAL_SPARE_MB + 1.5 * per) * 1e6)):
         monkeypatch.setattr(machine, "available_memory", lambda *a, r=room, **k: r)
         monkeypatch.setattr(machine, "cpus", lambda: 4)
+        capped = []  # the C allocator's arenas: one per worker thread the run starts
+        monkeypatch.setattr(machine, "cap_malloc_arenas", capped.append)
         caplog.clear()
         with caplog.at_level(logging.WARNING, logger="tiledsimplify"):
             summary = run_mod.run(path, tmp_path / f"{name}.npy", ratio=0.2, tile_points=1500)
         outs.append(np.load(tmp_path / f"{name}.npy"))
         assert ("running 1 instead of one per CPU" in caplog.text) == (name == "one")
         assert summary.workers == (1 if name == "one" else 4)
+        assert capped == [summary.workers]
     np.testing.assert_array_equal(outs[0], outs[1])
 
 
@@ -194,3 +197,71 @@ def test_evaluate_refuses_clouds_too_big_for_the_memory_left(tmp_path, monkeypat
     assert main(["report", str(orig), str(kept), "-o", str(out)]) == EXIT_INPUT
     assert f"{orig} and {kept}: reporting on 3,750 points in memory needs about" in caplog.text
     assert "Report on a part: crop both clouds" in caplog.text and not out.exists()
+
+
+_ARENAS = """
+import ctypes, re, sys, tempfile, threading
+import numpy as np
+from tiledsimplify import machine
+print(machine.cap_malloc_arenas(int(sys.argv[1])))
+gate = threading.Barrier(6)
+def work():  # six threads alive at once, each allocating: glibc gives each its own arena
+    gate.wait()
+    for _ in range(20):
+        np.ones(50_000).sum()
+    gate.wait()
+threads = [threading.Thread(target=work) for _ in range(6)]
+for t in threads:
+    t.start()
+for t in threads:
+    t.join()
+libc = ctypes.CDLL(None)
+libc.fopen.restype = ctypes.c_void_p
+with tempfile.NamedTemporaryFile(suffix=".xml") as f:
+    fp = ctypes.c_void_p(libc.fopen(f.name.encode(), b"w"))
+    libc.malloc_info(0, fp)
+    libc.fclose(fp)
+    print(len(re.findall("<heap nr=", open(f.name).read())))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or not hasattr(os, "confstr")
+                    or "glibc" not in (os.confstr("CS_GNU_LIBC_VERSION") or ""),
+                    reason="glibc's malloc arenas")
+def test_the_c_allocator_keeps_at_most_one_arena_per_worker():
+    def arenas(n, **env):
+        env = {**{k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}, **env}
+        out = subprocess.run([sys.executable, "-c", _ARENAS, str(n)], capture_output=True,
+                             text=True, check=True, env=env).stdout
+        asked, heaps = out.split()
+        return asked, int(heaps)
+
+    asked, capped = arenas(2)
+    assert asked == "True" and 1 <= capped <= 2
+    # the user's choice wins: 0 is glibc's own default, an arena for each of the six threads
+    asked, free = arenas(2, MALLOC_ARENA_MAX="0")
+    assert asked == "False" and free > 2
+
+
+class _Libc:
+    def __init__(self, glibc=True):
+        self.calls = []
+        if glibc:
+            self.gnu_get_libc_version = lambda: b"2.36"
+
+    def mallopt(self, param, value):
+        self.calls.append((param, value))
+        return 1
+
+
+def test_the_arena_cap_asks_glibc_alone_and_only_where_the_user_did_not():
+    libc = _Libc()
+    assert machine.cap_malloc_arenas(3, environ={}, libc=libc)
+    assert libc.calls == [(machine.M_ARENA_MAX, 3)] and machine.M_ARENA_MAX == -8
+    libc = _Libc()
+    assert not machine.cap_malloc_arenas(3, environ={"MALLOC_ARENA_MAX": "4"}, libc=libc)
+    assert not machine.cap_malloc_arenas(0, environ={}, libc=libc)
+    assert libc.calls == []
+    libc = _Libc(glibc=False)  # musl has mallopt too, without arenas to cap
+    assert not machine.cap_malloc_arenas(3, environ={}, libc=libc)
+    assert libc.calls == []

@@ -115,3 +115,47 @@ def available_memory(proc="/proc", cgroup_root="/sys/fs/cgroup"):
 def gb(nbytes):
     """``nbytes`` for a message: ``"1.5 GB"``."""
     return f"{nbytes / 1e9:,.1f} GB"
+
+
+#: glibc's ``mallopt`` parameter for the most malloc arenas a process keeps (``M_ARENA_MAX``)
+M_ARENA_MAX = -8
+
+
+def cap_malloc_arenas(n, environ=None, libc=None):
+    """Let this process's C allocator keep at most ``n`` arenas (glibc ``mallopt(M_ARENA_MAX,
+    n)``; a run passes its worker thread count). Returns True if it was asked.
+
+    glibc gives each thread an arena of its own at its first allocation, up to eight per core
+    (then threads share them), and memory freed in one arena serves only the threads that
+    allocate from it: the ingest's decoder and writer threads, zarr's event loop and each
+    worker thread keep what their earlier tiles freed. A run's peak memory thus depended on
+    which thread had run which tile: the 1M-point LAZ scan, 150k-point tiles, 2 worker
+    threads, 510-538 or 627-654 MB from run to run (1 worker 558-566 MB). Capped at the
+    worker count: 469-479 MB with 2 workers, 379-391 with 1, at the same wall time; the 10M
+    scan 592-633 MB against 787-798 (alternating runs, 2026-12-05, ``docs/measurements.md``).
+    One arena for 2 workers: 400-437 MB but 6 % slower (the threads wait on its lock).
+
+    Left alone where the user chose (``MALLOC_ARENA_MAX`` in the environment; ``0`` is
+    glibc's own default) and where the C library is not glibc (macOS; musl, whose
+    ``mallopt`` does nothing). glibc fixes the cap the first time a thread needs an arena beyond its eighth, so
+    in a process that had already made that many it has no effect; within one process the
+    first cap set counts for later runs too.
+    """
+    environ = os.environ if environ is None else environ
+    if "MALLOC_ARENA_MAX" in environ or n < 1:
+        return False
+    if libc is None:
+        try:
+            import ctypes
+            libc = ctypes.CDLL(None)
+        except OSError:
+            return False
+    mallopt = getattr(libc, "mallopt", None)
+    if mallopt is None or not _is_glibc(libc):
+        return False
+    return bool(mallopt(M_ARENA_MAX, int(n)))
+
+
+def _is_glibc(libc):
+    """Whether ``libc`` (a ``ctypes`` library) is GNU libc (it has ``gnu_get_libc_version``)."""
+    return getattr(libc, "gnu_get_libc_version", None) is not None

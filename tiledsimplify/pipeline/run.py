@@ -574,6 +574,7 @@ def _pool_process(run_pid=None):
         os._exit(1)  # the run died before this process got here
     from dask.multiprocessing import initialize_worker_process
     initialize_worker_process()
+    machine.cap_malloc_arenas(1)  # one tile at a time here (see the threads' cap in run)
     if sys.platform.startswith("linux"):
         parent = os.getppid()  # the run's process (or a forkserver: then its death counts)
         try:
@@ -880,6 +881,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                     f"{tile_points:,}", f"{n:,}", f"{math.ceil(n / tile_points):,}",
                     f"{default_tile_points(n):,}")
     workers = local_workers(scheduler, workers, client, int(tile_points))
+    if client is None and scheduler in ("threads", "synchronous"):  # the peak memory steady
+        machine.cap_malloc_arenas(workers)  # and lower: one C allocator arena per worker
     opts = asdict(options)
     # as the store keeps them (JSON): an unbounded option (reach, edge_share = inf) by name
     saved = {k: repr(v) if isinstance(v, float) and not math.isfinite(v) else v
