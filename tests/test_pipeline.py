@@ -490,6 +490,41 @@ def test_cut_hausdorff_is_the_largest_core_gap_under_the_cut(bunny, tmp_path):
     assert max(gaps) == ts.run_attrs["cut_hausdorff"] > 0
 
 
+def test_each_tiles_kept_flags_are_read_once_per_cut(bunny, tmp_path, monkeypatch):
+    # both passes read a tile's kept flags for its own view and its neighbours' views; a
+    # process reads each once per cut, and a run leaves no cached flags behind
+    from tiledsimplify.pipeline import tile_refine
+    _, path = bunny
+    store = tmp_path / "store"
+    assert run(path, tmp_path / "out.npy", ratio=0.2, tile_points=1500, store=store).refined
+    assert not tile_refine._kept_cache
+    reads = []
+    real = TileStore.read_result
+    monkeypatch.setattr(TileStore, "read_result",
+                        lambda self, t, name: reads.append((t, name)) or real(self, t, name))
+    ts = TileStore.open(store)
+    cut, _ = tile_refine._cut(ts)
+    for i in range(ts.n_tiles):
+        tile_refine._view(ts, i, cut)
+    assert ts.n_tiles >= 8 and sorted(reads) == [(i, "step") for i in range(ts.n_tiles)]
+    for i in range(ts.n_tiles):
+        step = real(ts, i, "step")
+        got = tile_refine._kept(ts, i, cut)
+        np.testing.assert_array_equal(got, (step < 0) | (step >= cut[i]))
+        assert not got.flags.writeable
+    assert len(reads) == ts.n_tiles
+    ts.set_run_attrs({"cut_key": "another cut"})  # another cut: read again
+    tile_refine._kept(TileStore.open(store), 0, cut)
+    assert len(reads) == ts.n_tiles + 1
+    # the least recently used go beyond the byte limit (here: one tile's flags)
+    tile_refine.clear_kept()
+    monkeypatch.setattr(tile_refine, "KEPT_CACHE_BYTES", 1)
+    for i in (0, 1, 0):
+        tile_refine._kept(ts, i, cut)
+    assert len(tile_refine._kept_cache) == 1 and len(reads) == ts.n_tiles + 4
+    tile_refine.clear_kept()
+
+
 def test_a_cut_wider_than_the_halo_is_refined_in_views_that_wide(bunny, tmp_path):
     """At small ratios the cut leaves gaps wider than the halo (by default 10 spacings; the
     1M-point scan of benchmarks/speed.py at 5 %: 12.2), and the run skipped the gap refinement

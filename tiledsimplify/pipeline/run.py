@@ -54,6 +54,7 @@ from .budget import kept_in_tile, merge_passes, plan_cut, store_pass, store_sequ
 from .input_order import InputRanks
 from .tile_refine import (
     MAX_WIDTH,
+    clear_kept,
     cut_hausdorff,
     is_refined,
     refine_phases,
@@ -1042,8 +1043,11 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         refined = False
         if options.refines and target > 0 and 0 < n_removed == n - target:  # something to swap
             radius = edge_cover_radius(opts.get("spacing"), target / n)
-            refined = _refine(ts, store_path, prefix, scheduler, workers, client, progress,
-                              radius)
+            try:
+                refined = _refine(ts, store_path, prefix, scheduler, workers, client,
+                                  progress, radius)
+            finally:  # the passes' cache of kept flags in this process (a cluster's
+                clear_kept()  # workers keep theirs, at most KEPT_CACHE_BYTES, to their end)
         stage("refine")
         n_out, n_boundary = _write_output(ts, source, output, prefix, refined, client)
         stage("output")
