@@ -148,7 +148,7 @@ def cap_malloc_arenas(n, environ=None, libc=None):
         try:
             import ctypes
             libc = ctypes.CDLL(None)
-        except OSError:
+        except (OSError, TypeError):  # no C library loaded by name (Windows)
             return False
     mallopt = getattr(libc, "mallopt", None)
     if mallopt is None or not _is_glibc(libc):
