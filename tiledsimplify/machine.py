@@ -137,9 +137,9 @@ def cap_malloc_arenas(n, environ=None, libc=None):
 
     Left alone where the user chose (``MALLOC_ARENA_MAX`` in the environment; ``0`` is
     glibc's own default) and where the C library is not glibc (macOS; musl, whose
-    ``mallopt`` does nothing). glibc fixes the cap the first time a thread needs an arena beyond its eighth, so
-    in a process that had already made that many it has no effect; within one process the
-    first cap set counts for later runs too.
+    ``mallopt`` does nothing). glibc fixes the cap the first time a thread needs an arena
+    beyond its eighth, so in a process that had already made that many it has no effect;
+    within one process the first cap set counts for later runs too.
     """
     environ = os.environ if environ is None else environ
     if "MALLOC_ARENA_MAX" in environ or n < 1:

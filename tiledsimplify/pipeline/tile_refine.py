@@ -84,10 +84,10 @@ def _kept(store, tile, cut):
     Both passes read each tile's flags for its own view and for the view of every tile its
     halo reaches (the 1M-point scan: 89 reads of 10 step arrays, 0.60 s of the 2 worker
     threads; zarr's reads do not overlap). The flags are a fixed function of the store's
-    input and settings (its fingerprint) and the cut (its key), which name them here; the
-    least recently used go beyond :data:`KEPT_CACHE_BYTES`."""
+    input and settings (its fingerprint) and the cut (its key, and the tile's step), which
+    name them here; the least recently used go beyond :data:`KEPT_CACHE_BYTES`."""
     key = (str(store.path), store.config.get("fingerprint"), store.run_attrs.get("cut_key"),
-           int(tile))
+           int(tile), int(cut[tile]))
     with _kept_lock:
         got = _kept_cache.get(key)
         if got is not None:
