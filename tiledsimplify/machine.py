@@ -131,7 +131,7 @@ def cap_malloc_arenas(n, environ=None, libc=None):
     worker thread keep what their earlier tiles freed. A run's peak memory thus depended on
     which thread had run which tile: the 1M-point LAZ scan, 150k-point tiles, 2 worker
     threads, 510-538 or 627-654 MB from run to run (1 worker 558-566 MB). Capped at the
-    worker count: 469-479 MB with 2 workers, 379-391 with 1, at the same wall time; the 10M
+    worker count: 473-513 MB with 2 workers, 379-391 with 1, at the same wall time; the 10M
     scan 592-633 MB against 787-798 (alternating runs, 2026-12-05, ``docs/measurements.md``).
     One arena for 2 workers: 400-437 MB but 6 % slower (the threads wait on its lock).
 
