@@ -1399,3 +1399,25 @@ def test_edge_share_in_tiles_agrees_between_passes(tmp_path):
                 options={"edge_share": float("inf")})
     assert not every.reached and every.n_output == every.n_boundary > 120
     assert 0 < a.n_boundary < 0.6 * 120  # flagged points kept: at most the share, and a few
+
+
+_LOCAL_RUN = """
+import sys
+from tiledsimplify.pipeline import run
+run(sys.argv[1], sys.argv[2], ratio=0.2, tile_points=1500, scheduler=sys.argv[3], workers=2)
+print(",".join(sorted({m.split(".")[0] for m in sys.modules} & {"distributed", "tornado"})))
+"""
+
+
+@pytest.mark.parametrize("scheduler", ["threads", "synchronous", "processes"])
+def test_a_local_run_never_imports_dask_distributed(bunny, tmp_path, scheduler):
+    # dask.compute given a scheduler's name imports dask.distributed to look for a client
+    # (0.1-0.3 s); a local run names dask's function instead
+    import subprocess
+    import sys
+    X, path = bunny
+    out = subprocess.run([sys.executable, "-c", _LOCAL_RUN, str(path), str(tmp_path / "o.npy"),
+                          scheduler], check=True, capture_output=True, text=True).stdout
+    assert out.strip() == ""
+    assert len(np.load(tmp_path / "o.npy")) == round(0.2 * len(X))
+
