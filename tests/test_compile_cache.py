@@ -134,3 +134,41 @@ def test_a_compile_ahead_holds_a_lock_that_tile_tasks_wait_on(tmp_path, monkeypa
     fcntl.flock(probe, fcntl.LOCK_SH | fcntl.LOCK_NB)  # free again
     probe.close()
     compile_cache.wait()  # at once when nobody compiles
+
+
+_LOAD = """
+import json, sys
+from tiledsimplify.core import compile_cache as c
+entries = c.read_signatures(sys.argv[1])
+loaded = c.load(entries)
+out = {"loaded": loaded}
+for kernel, _, sig in entries:
+    d = c._dispatcher(kernel)
+    out[kernel] = {"has": sig in d.signatures, "hits": sum(d.stats.cache_hits.values()),
+                   "misses": sum(d.stats.cache_misses.values())}
+print(json.dumps(out))
+"""
+
+
+def test_load_takes_the_cached_kernels_and_compiles_none(tmp_path):
+    """load() brings every recorded kernel the cache holds into the process from the cache (a
+    cache hit, no compile) and leaves one it lacks to its first call (not compiled)."""
+    cached = {"tiledsimplify.core.zorder:_keys", "tiledsimplify.core.adjacency:_is_sorted_upper"}
+    absent = "tiledsimplify.core.adjacency:_fill_sorted"
+    lines = compile_cache.SIGNATURES.read_text().splitlines()
+    pick = [line for line in lines if line.split("\t")[0] in cached]
+    other = [line for line in lines if line.split("\t")[0] == absent][:1]
+    assert len(pick) == 2 and len(other) == 1
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    warm = tmp_path / "warm.txt"
+    warm.write_text("\n".join(pick) + "\n")
+    subprocess.run([sys.executable, "-c", _IN_FRESH_CACHE, str(warm)], env=env, check=True,
+                   capture_output=True)
+    every = tmp_path / "all.txt"
+    every.write_text("\n".join(pick + other) + "\n")
+    out = json.loads(subprocess.run([sys.executable, "-c", _LOAD, str(every)], env=env,
+                                    check=True, capture_output=True, text=True).stdout)
+    assert out["loaded"] == 2
+    for kernel in cached:
+        assert out[kernel] == {"has": True, "hits": 1, "misses": 0}
+    assert out[absent] == {"has": False, "hits": 0, "misses": 0}

@@ -1421,3 +1421,39 @@ def test_a_local_run_never_imports_dask_distributed(bunny, tmp_path, scheduler):
     assert out.strip() == ""
     assert len(np.load(tmp_path / "o.npy")) == round(0.2 * len(X))
 
+
+def test_kernels_load_while_the_input_is_read(bunny, tmp_path, monkeypatch):
+    # on a warm cache the kernels load in a thread started before the ingest and joined
+    # before the first tile (threads, synchronous); the processes' pool and a cluster's
+    # workers load their own; a cold cache compiles instead, as a stage of its own
+    import importlib
+    import threading
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    from tiledsimplify.core import compile_cache
+    events = []
+
+    class Loader:
+        def join(self):
+            events.append("joined")
+
+    real_simplify = R.simplify_tile
+
+    def simplify_tile(*args, **kw):
+        events.append("tile")
+        return real_simplify(*args, **kw)
+
+    monkeypatch.setattr(compile_cache, "start", lambda jobs: None)
+    monkeypatch.setattr(compile_cache, "start_loading",
+                        lambda: events.append("started") or Loader())
+    monkeypatch.setattr(R, "simplify_tile", simplify_tile)
+    _, path = bunny
+    s = run(path, tmp_path / "o.npy", ratio=0.2, tile_points=1500, workers=2)
+    assert events[:3] == ["started", "joined", "tile"] and events.count("started") == 1
+    assert "compile" not in s.seconds
+    for scheduler in ("threads", "synchronous"):
+        assert isinstance(R._start_compile(None, scheduler, 2)[0], Loader)
+    assert R._start_compile(None, "processes", 2) == (None, False)
+    assert R._start_compile(object(), "threads", 2) == (None, False)
+    compiling = threading.Thread(target=lambda: None)
+    monkeypatch.setattr(compile_cache, "start", lambda jobs: compiling)
+    assert R._start_compile(None, "threads", 2) == (compiling, True)

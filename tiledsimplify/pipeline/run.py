@@ -495,14 +495,22 @@ def _connect(address):
 
 
 def _start_compile(client, scheduler, workers):
-    """On a cold kernel cache with local workers: compile every kernel in ``workers``
-    processes while the input is ingested (:func:`..core.compile_cache.start`). Not for a
-    cluster, whose workers compile or load their own cache (``tiledsimplify compile`` on each
-    node or in its image spares them that)."""
+    """``(thread, compiling)``: on a cold kernel cache with local workers, every kernel
+    compiled in ``workers`` processes while the input is ingested
+    (:func:`..core.compile_cache.start`); on a warm one, with tiles run in this process
+    (threads, synchronous), the kernels loaded from it meanwhile
+    (:func:`..core.compile_cache.start_loading`). ``(None, False)`` for a cluster, whose
+    workers compile or load their own cache (``tiledsimplify compile`` on each node or in its
+    image spares them that)."""
     if client is not None or scheduler not in SCHEDULERS:
-        return None
-    return compile_cache.start(
+        return None, False
+    thread = compile_cache.start(
         1 if scheduler == "synchronous" else workers or machine.cpus())
+    if thread is not None:
+        return thread, True
+    if scheduler == "processes":  # the pool's processes load their own
+        return None, False
+    return compile_cache.start_loading(), False
 
 
 def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describe=None,
@@ -920,7 +928,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     try:
         if client is None and isinstance(scheduler, str) and scheduler.startswith("tcp://"):
             client = held.enter_context(_connect(scheduler))  # one connection for every stage
-        warming = _start_compile(client, scheduler, workers)
+        warming, compiling = _start_compile(client, scheduler, workers)
         if store is None:
             store_path = Path(held.enter_context(_temporary_directory())) / "store.zarr"
         else:  # absolute: workers elsewhere (another directory, another machine) open it
@@ -980,9 +988,10 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         degrees = degrees_message(input, *ts.root_attrs["bounds"])
         if degrees:
             log.warning("%s", degrees)
-        if warming is not None:  # the kernels' first compile, started before the ingest
-            warming.join()
-            stage("compile")
+        if warming is not None:  # the kernels' first compile (or their loading), started
+            warming.join()  # before the ingest
+            if compiling:
+                stage("compile")
 
         # one spacing for every tile: the coverage measure's scale and the Voronoi reach
         spacing = options.spacing
