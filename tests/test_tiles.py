@@ -382,6 +382,27 @@ def test_a_part_samples_below_a_key_the_whole_sample_lies_under():
     assert _key_limit(1000, 1000) is None and _key_limit(10, None) is None
 
 
+def test_the_sample_is_the_k_smallest_keys_however_the_input_is_chunked():
+    # bottom-k by a hash of the global index: every chunking (and a part's key limit) gives
+    # the sample that sorting all the keys gives
+    from tiledsimplify.tiles.store import _BottomK, _key_limit, _sample_keys
+    rng = np.random.default_rng(5)
+    n = 40_000
+    xyz = rng.random((n, 3))
+    for k, seed in [(1_000, 0), (39_999, 2), (50_000, 1), (1, 7)]:
+        want = np.sort(np.argsort(_sample_keys(np.arange(n), seed), kind="stable")[:k])
+        for cuts in ([n], [1, 2, n], sorted(rng.choice(n, 9, replace=False).tolist()) + [n]):
+            for limit in (None, _key_limit(k, n)):
+                sampler = _BottomK(k, seed, limit)
+                start = 0
+                for end in cuts:
+                    sampler.add(start, xyz[start:end])
+                    start = end
+                got = np.sort(sampler.index)
+                assert np.array_equal(got, want), (k, cuts, limit)
+                assert np.array_equal(sampler.result(), xyz[want])
+
+
 def test_halo_points_match_brute_force(sp_data, sp_store):
     xyz, _ = sp_data
     _, j_all, t_all = all_cores(sp_store)
