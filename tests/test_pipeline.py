@@ -443,9 +443,10 @@ def test_same_output_for_every_scheduler(bunny, tmp_path, cluster, caplog):
     assert len(set(outs.values())) == 1
 
 
-@pytest.mark.parametrize("workers", [1, 2])
+@pytest.mark.parametrize("workers, scheduler", [(1, "threads"), (2, "threads"),
+                                               (1, "processes")])
 def test_tiles_start_largest_first_and_refine_after_their_earlier_neighbours(
-        bunny, tmp_path, caplog, workers):
+        bunny, tmp_path, caplog, workers, scheduler):
     # longest processing time first: with one worker the tiles finish in the order they
     # start, which must be largest first (the key names steer dask's order); a refined tile
     # is logged after every neighbour of an earlier phase, whose flags it reads
@@ -454,7 +455,7 @@ def test_tiles_start_largest_first_and_refine_after_their_earlier_neighbours(
     store = tmp_path / "store"
     with caplog.at_level("INFO", logger="tiledsimplify"):
         s = run(path, tmp_path / "out.npy", ratio=0.2, tile_points=700, store=store,
-                workers=workers)
+                workers=workers, scheduler=scheduler)
     ts = TileStore.open(store)
     counts = ts.tile_counts
     assert s.refined and ts.n_tiles >= 8 and len(set(counts.tolist())) > 2
@@ -1457,3 +1458,40 @@ def test_kernels_load_while_the_input_is_read(bunny, tmp_path, monkeypatch):
     compiling = threading.Thread(target=lambda: None)
     monkeypatch.setattr(compile_cache, "start", lambda jobs: compiling)
     assert R._start_compile(None, "threads", 2) == (compiling, True)
+
+
+def test_processes_run_every_stage_in_one_pool_a_task_at_a_time(bunny, tmp_path, monkeypatch):
+    # one pool for the run (a pool a stage spawned its processes, imported the package and
+    # loaded the kernels again at every stage), handed one task per free process: dask's
+    # default batches of 6 ran the largest tiles last
+    import importlib
+
+    from dask.callbacks import Callback
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    made = []
+    real_pool = R._process_pool
+
+    def counting_pool(workers):
+        made.append(workers)
+        return real_pool(workers)
+
+    monkeypatch.setattr(R, "_process_pool", counting_pool)
+    out = {"now": 0, "most": 0}
+
+    def pretask(key, dsk, state):
+        out["now"] += 1
+        out["most"] = max(out["most"], out["now"])
+
+    def posttask(key, result, dsk, state, worker_id):
+        out["now"] -= 1
+
+    _, path = bunny
+    with Callback(pretask=pretask, posttask=posttask):
+        s = run(path, tmp_path / "p.npy", ratio=0.2, tile_points=1500, scheduler="processes",
+                workers=2)
+    assert s.refined and s.n_tiles >= 6 and made == [2]
+    assert out["most"] == 2
+    assert R._RUN_POOL.get() is None  # the run's pool is gone with the run
+    threads = run(path, tmp_path / "t.npy", ratio=0.2, tile_points=1500, workers=2)
+    assert threads.n_output == s.n_output
+    assert np.array_equal(np.load(tmp_path / "p.npy"), np.load(tmp_path / "t.npy"))
