@@ -147,7 +147,10 @@ class _Remote:
     def scheduler_info(self):
         return {"workers": {"tcp://10.0.0.2:40000": {}}}
 
-    def run(self, function, *args, on_error="raise"):
+    def run(self, function, *args, on_error="raise", workers=None, wait=True):
+        if function is W.load_kernels:  # after the check, not waited for
+            assert workers == ["tcp://10.0.0.2:40000"] and wait is False
+            return None
         return {"tcp://10.0.0.2:40000": self.reply(function, *args)}
 
 
@@ -240,6 +243,28 @@ def test_cold_workers_compile_once_a_machine_while_the_input_is_read(bunny, tmp_
     assert any(cache.rglob("*.nbi"))
     run(path, tmp_path / "warm.npy", ratio=0.2, tile_points=3000, workers=2)
     assert (tmp_path / "cold.npy").read_bytes() == (tmp_path / "warm.npy").read_bytes()
+
+
+def test_warm_workers_load_the_kernels_while_the_input_is_read(tmp_path):
+    # a worker whose cache holds the kernels loads them all once checked, before any task
+    from tiledsimplify.core import compile_cache
+    compile_cache.compile_all(2)  # this machine's cache, which the worker shares: warm
+
+    def loaded():
+        from tiledsimplify.core import compile_cache as c
+        return [sig in c._dispatcher(kernel).signatures for kernel, _, sig in
+                c.read_signatures()]
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0") as c, \
+            distributed.Client(c) as client:
+        assert not any(next(iter(client.run(loaded).values())))  # a fresh worker: none yet
+        assert W.check_workers(client, tmp_path, temporary=False) == 1
+        deadline = time.monotonic() + 60
+        while not all(got := next(iter(client.run(loaded).values()))):
+            assert time.monotonic() < deadline, got
+            time.sleep(0.2)
+        assert len(got) == len(compile_cache.read_signatures()) > 20
 
 
 def test_an_input_the_workers_cannot_read_is_ingested_by_the_client(tmp_path, caplog):
