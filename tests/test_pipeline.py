@@ -861,11 +861,17 @@ def test_refine_phases_never_put_neighbours_together():
     plan = plan_tiles(X, len(X), 500, halo=0.05)
     phase = refine_phases(plan, 0.05)
     assert plan.n_tiles >= 30 and len(phase) == plan.n_tiles
+    degree = np.array([len(plan.neighbours(i, 0.05)) for i in range(plan.n_tiles)])
+    first = np.lexsort((np.arange(plan.n_tiles), -degree))  # most neighbours first, by index
+    at = np.empty(plan.n_tiles, dtype=np.int64)
+    at[first] = np.arange(plan.n_tiles)
+    assert degree.min() < degree.max() and phase[first[0]] == 0
     for i in range(plan.n_tiles):
         nbrs = plan.neighbours(i, 0.05)
         assert (phase[nbrs] != phase[i]).all()
-        # greedy by index: each tile takes the lowest phase its earlier neighbours leave free
-        used = set(phase[nbrs[nbrs < i]].tolist())
+        # greedy in that order: each tile takes the lowest phase its neighbours coloured
+        # before it leave free
+        used = set(phase[nbrs[at[nbrs] < at[i]]].tolist())
         assert phase[i] == min(set(range(len(used) + 1)) - used)
     assert phase.max() + 1 < plan.n_tiles / 2  # phases stay few: tiles refine in parallel
     np.testing.assert_array_equal(phase, refine_phases(plan, 0.05))

@@ -9,8 +9,9 @@ refines after the global cut, one task per tile, in two stages:
    refinement needs a view of each tile ``G`` wide (below): the halo, or where ``G`` is wider
    (small ratios) a view of that width read from the neighbours' cores, after a second pass
    at that width makes ``G`` exact (:func:`refine_width`).
-2. :func:`refine_tile`, in **phases** (:func:`refine_phases`): a greedy colouring, by tile
-   index, of the graph that joins two tiles when one's view reaches the other's core. A tile
+2. :func:`refine_tile`, in **phases** (:func:`refine_phases`): a greedy colouring, tiles with
+   the most neighbours first, of the graph that joins two tiles when one's view reaches the
+   other's core. A tile
    starts once its neighbours of earlier phases are refined (not every tile of earlier phases:
    no barrier between phases), so tiles of one phase, and of different phases that are not
    neighbours, run in parallel. A tile sees its halo as the tiles of earlier phases refined it
@@ -60,8 +61,9 @@ from ..core.refine import refine_coverage
 from ..tiles import IncompleteStoreError, TileStore
 
 #: saved with the refined flags: flags of another scheme are redone ("phases" until 2026-12-05:
-#: without the flags' cover, :data:`~tiledsimplify.core.refine.EDGE_COVER`)
-SCHEME = "phases, edge cover"
+#: without the flags' cover, :data:`~tiledsimplify.core.refine.EDGE_COVER`; "phases, edge
+#: cover" until that afternoon: phases coloured by tile index, :func:`refine_phases`)
+SCHEME = "phases by neighbours, edge cover"
 
 
 def _cut(store):
@@ -142,12 +144,20 @@ def _refined(store, tile):
 
 
 def refine_phases(plan, halo):
-    """The phase of every tile: a greedy colouring by tile index of the graph of tiles whose
-    halo reaches the other's core (:meth:`TilePlan.neighbours`), so no two tiles of one
-    phase see each other's points. A fixed function of the plan and the halo."""
+    """The phase of every tile: a greedy colouring of the graph of tiles whose halo reaches
+    the other's core (:meth:`TilePlan.neighbours`), so no two tiles of one phase see each
+    other's points; tiles with the most neighbours are coloured first (Welsh & Powell 1967),
+    ties by index. A fixed function of the plan and the halo.
+
+    A tile waits for its neighbours of earlier phases, so the phases make chains of tasks.
+    Coloured by index (until 2026-12-05) a tile that neighbours most others could land in a
+    late phase behind a chain of them; by neighbour count such a tile is coloured first and
+    the chains come out shorter (docs/measurements.md, "The refinement's phases by neighbour
+    count")."""
     phase = np.full(plan.n_tiles, -1, dtype=np.int64)
-    for i in range(plan.n_tiles):
-        used = {int(phase[j]) for j in plan.neighbours(i, halo) if j < i}
+    nbrs = [plan.neighbours(i, halo) for i in range(plan.n_tiles)]
+    for i in sorted(range(plan.n_tiles), key=lambda i: (-len(nbrs[i]), i)):
+        used = {int(phase[j]) for j in nbrs[i] if phase[j] >= 0}
         phase[i] = next(c for c in range(len(used) + 1) if c not in used)
     return phase
 
