@@ -575,11 +575,11 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
 
 class _RunPool:
     """The "processes" scheduler's pool for every stage of one run (:func:`_process_pool`,
-    made at the first :meth:`get`). A pool a stage started its processes afresh at every stage
-    — spawned, the package imported, the kernels loaded and the memory of a tile grown again
-    in each; the 1M scan's tile stage took 11.3 s there against 7.6 with threads, its two
-    refinement stages 4.8 s against 1.9 (2026-12-05). :meth:`start` spawns the processes
-    before the ingest, so that they start while the input is read."""
+    made at the first :meth:`get`). Until 2026-12-05 each stage made a pool of its own, whose
+    processes spawned, imported the package, loaded the kernels and grew a tile's memory again
+    at every stage: the 1M scan's two refinement stages took 4.8 s against 1.9 with threads.
+    :meth:`start` spawns the processes before the ingest, so that they start while the input
+    is read."""
 
     def __init__(self, workers):
         self.workers = workers
