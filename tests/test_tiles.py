@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -298,6 +299,45 @@ else:
            chunk=st.integers(1, 3500), seed=st.integers(0, 2 ** 32), dup=st.booleans())
     def test_partition_property(n, tile_frac, chunk, seed, dup):
         check_random_case(n, tile_frac, chunk, seed, dup)
+
+
+def test_ingest_writes_run_a_batch_behind_and_never_two_at_once_on_an_array():
+    # the second pass writes a chunk's rows while it reads the next one; two writes to one
+    # array (a partial zarr chunk, then the rest of it) must not overlap
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from tiledsimplify.tiles.store import _Writes
+    log, lock = [], threading.Lock()
+
+    class Slow:
+        def __init__(self, name, fail=False):
+            self.name, self.fail = name, fail
+
+        def __setitem__(self, key, data):
+            with lock:
+                log.append(("start", self.name, key.start))
+            time.sleep(0.05)
+            with lock:
+                log.append(("end", self.name, key.start))
+            if self.fail:
+                raise OSError(f"{self.name}: disk full")
+
+    a, b = Slow("a"), Slow("b")
+    with ThreadPoolExecutor(4) as pool:
+        writes = _Writes(pool)
+        t = time.perf_counter()
+        writes.submit([(a, 0, 10, None), (b, 0, 10, None)])
+        assert time.perf_counter() - t < 0.04  # not waited for: one batch behind
+        writes.submit([(a, 10, 20, None)])  # waits for a's first write, then for batch 1
+        assert ("end", "a", 0) in log and ("end", "b", 0) in log
+        writes.drain()
+    assert log.index(("end", "a", 0)) < log.index(("start", "a", 10))
+    assert ("end", "a", 10) in log
+    with ThreadPoolExecutor(2) as pool, pytest.raises(OSError, match="c: disk full"):
+        writes = _Writes(pool)
+        writes.submit([(Slow("c", fail=True), 0, 10, None)])
+        writes.drain()
 
 
 def test_chunked_ingest_equals_whole_ingest(tmp_path):
