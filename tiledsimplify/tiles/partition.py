@@ -163,8 +163,11 @@ class TilePlan:
     def assign(self, xyz) -> np.ndarray:
         """Return the tile id of each point.
 
-        The split tree is walked one level at a time for all still-undecided points at once,
-        so the cost is ``O(m * depth)`` numpy work with no Python loop over points.
+        The split tree is walked node by node, each node splitting the indices of the points
+        that reached it by one comparison of one coordinate column: ``O(m * depth)`` numpy
+        work with no Python loop over points. Walked a level at a time for all points (until
+        2026-12-05), gathering each point's axis and split, it took 0.19 s a 1M-point chunk
+        against 0.034 s (a 100-tile plan; 1.6 s of the 10M scan's ingest).
 
         Parameters
         ----------
@@ -182,16 +185,19 @@ class TilePlan:
         if not np.isfinite(xyz).all():
             raise InputError("points contain NaN or infinite coordinates; remove them first")
         m = xyz.shape[0]
-        node = np.zeros(m, dtype=np.int32)
-        active = np.arange(m) if self.axis[0] >= 0 else np.zeros(0, dtype=np.int64)
-        while active.size:
-            nd = node[active]
-            ax = self.axis[nd].astype(np.intp)
-            go_right = xyz[active, ax] >= self.split[nd]
-            child = np.where(go_right, self.right[nd], self.left[nd])
-            node[active] = child
-            active = active[self.axis[child] >= 0]
-        return self.leaf[node]
+        columns = [np.ascontiguousarray(xyz[:, d]) for d in range(3)]
+        out = np.empty(m, dtype=self.leaf.dtype)
+        stack = [(0, np.arange(m))]
+        while stack:
+            nd, ids = stack.pop()
+            ax = int(self.axis[nd])
+            if ax < 0:
+                out[ids] = self.leaf[nd]
+                continue
+            right = columns[ax][ids] >= self.split[nd]
+            stack.append((int(self.right[nd]), ids[right]))
+            stack.append((int(self.left[nd]), ids[~right]))
+        return out
 
     # ------------------------------------------------------------------ neighbourhood
     def neighbours(self, tile: int, halo: float) -> np.ndarray:
