@@ -324,12 +324,23 @@ def test_ingest_writes_run_a_batch_behind_and_never_two_at_once_on_an_array():
                 raise OSError(f"{self.name}: disk full")
 
     a, b = Slow("a"), Slow("b")
+    held = threading.Event()
+
+    class Held(Slow):
+        def __setitem__(self, key, data):
+            assert held.wait(30)
+            super().__setitem__(key, data)
+
     with ThreadPoolExecutor(4) as pool:
         writes = _Writes(pool)
-        t = time.perf_counter()
-        writes.submit([(a, 0, 10, None), (b, 0, 10, None)])
-        assert time.perf_counter() - t < 0.04  # not waited for: one batch behind
-        writes.submit([(a, 10, 20, None)])  # waits for a's first write, then for batch 1
+        first = threading.Thread(target=writes.submit, args=([(Held("h"), 0, 10, None)],))
+        first.start()
+        first.join(10)
+        assert not first.is_alive() and not log  # returned with its write still held
+        held.set()
+        writes.submit([(a, 0, 10, None), (b, 0, 10, None)])  # waits for the held batch
+        assert ("end", "h", 0) in log
+        writes.submit([(a, 10, 20, None)])  # waits for a's first write, then for batch 2
         assert ("end", "a", 0) in log and ("end", "b", 0) in log
         writes.drain()
     assert log.index(("end", "a", 0)) < log.index(("start", "a", 10))
