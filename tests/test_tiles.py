@@ -351,6 +351,46 @@ def test_ingest_writes_run_a_batch_behind_and_never_two_at_once_on_an_array():
         writes.drain()
 
 
+def test_chunks_are_read_one_ahead_in_order_with_errors_and_early_stops():
+    # the ingest reads the next chunk while it sorts this one: same items in the same order,
+    # never more than one read ahead, the reader's error raised in its place, and a caller
+    # that stops early stops the reader and closes the source
+    import threading
+
+    from tiledsimplify.tiles.store import _read_ahead
+    state = {"read": 0, "done": 0, "closed": False}
+    lock = threading.Lock()
+
+    def source(n, fail_at=None):
+        try:
+            for i in range(n):
+                if i == fail_at:
+                    raise OSError(f"chunk {i}: truncated file")
+                with lock:
+                    state["read"] += 1
+                    assert state["read"] - state["done"] <= 2  # handed out + one read ahead
+                yield i
+        finally:
+            state["closed"] = True
+
+    got = []
+    for item in _read_ahead(source(20)):
+        time.sleep(0.005)  # the reader gets ahead if it may
+        got.append(item)
+        with lock:
+            state["done"] += 1
+    assert got == list(range(20)) and state["closed"]
+    state.update(read=0, done=0, closed=False)
+    with pytest.raises(OSError, match="chunk 3: truncated file"):
+        for _ in _read_ahead(source(10, fail_at=3)):
+            state["done"] += 1
+    state.update(read=0, done=0, closed=False)
+    gen = _read_ahead(source(10))
+    assert next(gen) == 0
+    gen.close()
+    assert state["closed"] and state["read"] <= 2
+
+
 def test_chunked_ingest_equals_whole_ingest(tmp_path):
     xyz, attrs = sphere_plane(60_000, seed=3)
     kw = dict(tile_points=8_000, config={}, provenance={}, sample_size=20_000, seed=4)
