@@ -222,7 +222,7 @@ def load(entries=None):
 
     A kernel's first call loads it from the cache otherwise: ~0.25 s for all of them, under
     numba's one lock, so a run's first tiles waited for it on every thread (each of the 1M
-    scan's first two tiles 0.2-0.3 s slower, 2026-12-05). A kernel the cache lacks is left to
+    scan's first two tiles 0.2-0.4 s slower, 2026-12-05). A kernel the cache lacks is left to
     its first call (or to :func:`start`'s processes), never compiled here."""
     entries = read_signatures() if entries is None else entries
     done = 0

@@ -230,7 +230,7 @@ async def load_kernels() -> int:
     """Run on a worker whose kernel cache is warm: load every kernel it holds
     (:func:`..core.compile_cache.load`), in a thread beside the worker's event loop, before
     the first tile needs them. A worker's first tile loaded them itself, under numba's lock,
-    its other threads waiting (the local threads' first tiles were 0.2-0.3 s slower each,
+    its other threads waiting (the local threads' first tiles were 0.2-0.4 s slower each,
     2026-12-05). A coroutine: ``Client.run`` does not wait for one (``wait=False``)."""
     import asyncio
 

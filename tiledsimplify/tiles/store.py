@@ -273,8 +273,9 @@ class _BottomK:
         """Add a chunk's points (global indices from ``start``). Only its own ``k`` smallest
         keys below the bounds can enter the sample, so they are picked from the keys before
         any coordinate is gathered: a chunk of 1M points copied 40 MB of them into the merge
-        before, 0.1-0.25 s on a fresh process's first chunk (new memory is slow to touch on
-        these machines: docs/measurements.md, "Memory new to a process")."""
+        before, its first ``add`` in a fresh process 0.26 s against 0.03 s for the same chunk
+        again (new memory is slow to touch on these machines: docs/measurements.md, "Memory
+        new to a process")."""
         keys = _sample_keys(np.arange(start, start + xyz.shape[0], dtype=np.int64), self.seed)
         below = self.limit
         if self.keys.size >= self.k:
@@ -358,7 +359,7 @@ class _TileBuffer:
         n : int
             Rows taken.
         jobs : list of (zarr.Array, start, end, data)
-            Writes to run (in any order, concurrently) with :func:`_run_jobs`.
+            Writes to run (concurrently, each array's in order) with :class:`_Writes`.
         """
         if not self.pending:
             return 0, []
@@ -382,12 +383,6 @@ class _TileBuffer:
 def _write_job(job) -> None:
     arr, start, end, data = job
     arr[start:end] = data
-
-
-def _run_jobs(pool: ThreadPoolExecutor, jobs: list) -> None:
-    """Run write jobs concurrently (each touches a different array) and re-raise errors."""
-    for f in [pool.submit(_write_job, j) for j in jobs]:
-        f.result()
 
 
 class _Writes:
@@ -445,9 +440,9 @@ def _map_here(progress):
 
 def _read_ahead(chunks: Iterable):
     """``chunks``' items, the next one read in a thread while the caller works on this one:
-    the 10M-point LAZ scan's ingest 8.2-8.4 s against 8.7-9.0 (2026-12-05; decompression and
-    the LAS fields' copies beside the sorting and writing). At most two chunks in memory: the
-    one handed out and the one being read. An error of the reader is raised where its item
+    the 10M-point LAZ scan's ingest 8.2-8.9 s against 8.7-9.4 (5 alternating pairs,
+    2026-12-05; decompression and the LAS fields' copies beside the sorting and writing). At
+    most two chunks in memory: the one handed out and the one being read. An error of the reader is raised where its item
     would have come; a caller that stops early stops the reader, which closes ``chunks``."""
     import queue
     import threading
@@ -651,9 +646,9 @@ def _fill_part(path: str, part, base: int, intervals, spec, buffer_points: int,
         if j != len(intervals):
             raise InputError(f"the chunk source gave {j} chunks on the second pass but "
                              f"{len(intervals)} on the first; it must be re-iterable")
+        for b in buffers:  # every tile's last, partial chunk
+            writes.submit(b.flush(aligned=False)[1])
         writes.drain()
-        for b in buffers:
-            _run_jobs(pool, b.flush(aligned=False)[1])
     return {"points": read, "counts": [b.written for b in buffers]}
 
 
