@@ -491,6 +491,60 @@ def test_cut_hausdorff_is_the_largest_core_gap_under_the_cut(bunny, tmp_path):
     assert max(gaps) == ts.run_attrs["cut_hausdorff"] > 0
 
 
+def test_tiles_measure_their_own_gaps_while_refining(bunny, tmp_path, monkeypatch, caplog):
+    # where the cut's gaps are expected within the halo each tile measures its own gap under
+    # the cut in the refinement (no pass of gap tasks before it): the same output and G as
+    # the two passes, each tile's saved gap that of cut_hausdorff; a resumed run with tiles
+    # and G missing measures the missing ones again
+    import importlib
+
+    from tiledsimplify.pipeline import tile_refine
+    run_module = importlib.import_module("tiledsimplify.pipeline.run")
+    _, path = bunny
+    calls = []
+    real = run_module.cut_hausdorff
+    monkeypatch.setattr(run_module, "cut_hausdorff",
+                        lambda *a, **k: calls.append(a[1]) or real(*a, **k))
+    for ratio in (0.2, 0.1):
+        kw = {"ratio": ratio, "tile_points": 700, "progress": False}
+        monkeypatch.setattr(tile_refine, "GAP_SPACINGS", 1e9)  # never expected: two passes
+        run(path, tmp_path / "two.npy", store=tmp_path / f"two{ratio}", **kw)
+        assert len(calls) >= 8
+        calls.clear()
+        monkeypatch.setattr(tile_refine, "GAP_SPACINGS", 3.0)
+        store = tmp_path / f"one{ratio}"
+        with caplog.at_level("INFO", logger="tiledsimplify"):
+            s = run(path, tmp_path / "one.npy", store=store, **kw)
+        assert s.refined and not calls
+        assert not [r for r in caplog.records if "beyond the halo" in r.getMessage()]
+        assert (tmp_path / "one.npy").read_bytes() == (tmp_path / "two.npy").read_bytes()
+        ts, two = TileStore.open(store), TileStore.open(tmp_path / f"two{ratio}")
+        g = ts.run_attrs["cut_hausdorff"]
+        assert g == two.run_attrs["cut_hausdorff"] > 0 and ts.n_tiles >= 8
+        phase = tile_refine.refine_phases(ts.plan, ts.halo)
+        assert phase.max() >= 2  # tiles with earlier neighbours: gaps from a band of faces
+        gaps = [tile_refine.refined_gap(ts, i) for i in range(ts.n_tiles)]
+        assert gaps == [real(str(store), i)["hausdorff"] for i in range(ts.n_tiles)]
+        assert max(gaps) == g
+    # resumed: two tiles' flags and G missing
+    import zarr
+    for t in (1, 2):
+        del zarr.open_group(str(store), mode="r+")[f"tiles/{t}/refined"]
+    ts.set_run_attrs({"cut_hausdorff": None})
+    caplog.clear()
+    with caplog.at_level("INFO", logger="tiledsimplify"):
+        run(path, tmp_path / "again.npy", store=store, **kw)
+    assert sorted(int(r.getMessage().split()[2]) for r in caplog.records
+                  if r.getMessage().startswith("refined tile ")) == [1, 2]
+    assert (tmp_path / "again.npy").read_bytes() == (tmp_path / "one.npy").read_bytes()
+    assert TileStore.open(store).run_attrs["cut_hausdorff"] == g and not calls
+    # expected within a default halo (10 spacings) from 9 % kept
+    assert tile_refine.gaps_expected_within(10.0, 1.0, 0.2)
+    assert tile_refine.gaps_expected_within(10.0, 1.0, 0.09)
+    assert not tile_refine.gaps_expected_within(10.0, 1.0, 0.05)
+    assert not tile_refine.gaps_expected_within(10.0, 0.0, 0.2)
+
+
 def test_each_tiles_kept_flags_are_read_once_per_cut(bunny, tmp_path, monkeypatch):
     # both passes read a tile's kept flags for its own view and its neighbours' views; a
     # process reads each once per cut, and a run leaves no cached flags behind
@@ -526,7 +580,8 @@ def test_each_tiles_kept_flags_are_read_once_per_cut(bunny, tmp_path, monkeypatc
     tile_refine.clear_kept()
 
 
-def test_a_cut_wider_than_the_halo_is_refined_in_views_that_wide(bunny, tmp_path):
+def test_a_cut_wider_than_the_halo_is_refined_in_views_that_wide(bunny, tmp_path,
+                                                                  monkeypatch, caplog):
     """At small ratios the cut leaves gaps wider than the halo (by default 10 spacings; the
     1M-point scan of benchmarks/speed.py at 5 %: 12.2), and the run skipped the gap refinement
     with a warning — at 5 % its Hausdorff distance was 0.0423 instead of 0.0295 refined. Now
@@ -556,6 +611,18 @@ def test_a_cut_wider_than_the_halo_is_refined_in_views_that_wide(bunny, tmp_path
     assert gap("a.npy") < 0.9 * g
     run(path, tmp_path / "b.npy", scheduler="synchronous", **kw)
     assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
+    # the gaps expected within the halo, wrongly: the tiles measure them while refining, find
+    # some beyond, and the run measures G and refines every tile again, as above
+    monkeypatch.setattr(tile_refine, "GAP_SPACINGS", 0.0)
+    for scheduler in ("threads", "processes"):
+        caplog.clear()
+        with caplog.at_level("INFO", logger="tiledsimplify"):
+            run(path, tmp_path / "c.npy", store=tmp_path / scheduler, scheduler=scheduler,
+                **kw)
+        assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "c.npy").read_bytes()
+        lines = [r.getMessage() for r in caplog.records]
+        assert [m for m in lines if "lies beyond the halo (" in m], lines
+        assert TileStore.open(tmp_path / scheduler).run_attrs["cut_hausdorff"] == g
     # no view wider than MAX_WIDTH halos is read: then no refinement, as before
     assert tile_refine.refine_width(1.0, 0.5) == 1.0 and tile_refine.refine_width(1.0, 2.5) == 2.5
     assert tile_refine.refine_width(1.0, tile_refine.MAX_WIDTH + 0.1) is None

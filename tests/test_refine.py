@@ -250,6 +250,28 @@ def test_everything_fixed_changes_nothing():
     assert np.array_equal(out, keep) and info["swaps"] == 0
 
 
+def test_distances_before_the_swaps_are_the_kd_trees():
+    # before_out: every point's distance to the kept set before any swap (0 where it takes no
+    # part), also where nothing may go; the swaps are those made without it
+    X = _wavy(800)
+    rng = np.random.default_rng(1)
+    keep = rng.random(800) < 0.2
+    addable = X[:, 0] < 2.0
+    watch = ~addable & (rng.random(800) < 0.5)
+    d = cKDTree(X[keep]).query(X)[0]
+    d[~(keep | addable | watch)] = 0.0
+    for fixed in (np.zeros(800, dtype=bool), keep):  # with swaps, and nothing may go
+        got = np.full(800, np.nan)
+        out, info = refine_coverage(X, keep, fixed, addable=addable, watch=watch,
+                                    before_out=got)
+        np.testing.assert_array_equal(got, d)
+        ref, _ = refine_coverage(X, keep, fixed, addable=addable, watch=watch)
+        assert np.array_equal(out, ref) and (info["swaps"] > 0) == (not fixed.any())
+    got = np.full(800, np.nan)
+    refine_coverage(X, np.zeros(800, dtype=bool), keep, before_out=got)
+    assert np.isinf(got).all()
+
+
 def test_plate_at_ten_percent_near_ideal_covering():
     """On a uniformly sampled plate at 10 %, the refined Hausdorff distance is within 1.3x the
     covering radius of a hexagonal lattice with as many points (the densest covering)."""

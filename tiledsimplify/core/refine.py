@@ -365,7 +365,8 @@ def inputs(X, keep, fixed, addable, watch, tie):
 
 
 def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=0.05,
-                    min_step=0.002, max_rounds=60, k=16, edges=None, edge_radius=0.0):
+                    min_step=0.002, max_rounds=60, k=16, edges=None, edge_radius=0.0,
+                    before_out=None):
     """Swap kept points at equal count so that the Hausdorff distance to the input drops.
 
     Parameters
@@ -401,6 +402,11 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         bring within it (where too few kept points could go) keeps its nearest kept point.
     edge_radius : float
         Model units; 0 (or no ``edges``): no cover, the rounds as without it bit for bit.
+    before_out : float64 (n,), optional
+        Filled with each point's distance to the kept set before any swap, as the kd-tree
+        gives it (0 where the point takes no part; inf if nothing is kept): a tiled run
+        reads its tile's gaps under the cut from it
+        (:func:`~tiledsimplify.pipeline.tile_refine.refine_tile`).
 
     Returns
     -------
@@ -422,10 +428,14 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
     X, keep, fixed, addable, ignored, watched, tie = inputs(X, keep, fixed, addable, watch, tie)
     info = {"hausdorff_before": 0.0, "hausdorff_after": 0.0, "rounds": 0, "swaps": 0,
             "edge_swaps": 0}
+    dist = None
+    if before_out is not None:
+        dist = _distances(X, keep, ignored)
+        before_out[:] = dist
     if not (keep & ~fixed).any() or not (addable & ~keep).any():
         return keep, info  # nothing may go, or nothing to add
-    dist, _ = cKDTree(X[keep]).query(X)
-    dist[ignored] = 0.0
+    if dist is None:
+        dist = _distances(X, keep, ignored)
     H = float(dist[~watched].max())
     info["hausdorff_before"] = H
     if not H > 0:
@@ -469,6 +479,13 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         H = float(dist[~watched].max())
     info["hausdorff_after"] = H
     return keep, info
+
+
+def _distances(X, keep, ignored):
+    """Every point's distance to the kept points (inf if none is kept), 0 where ignored."""
+    dist = cKDTree(X[keep]).query(X)[0] if keep.any() else np.full(X.shape[0], np.inf)
+    dist[ignored] = 0.0
+    return dist
 
 
 def _swap(X, keep, fixed, added, level, cap, search_grid, tie, counted, k):

@@ -57,10 +57,12 @@ from .tile_refine import (
     MAX_WIDTH,
     clear_kept,
     cut_hausdorff,
+    gaps_expected_within,
     is_refined,
     refine_phases,
     refine_tile,
     refine_width,
+    refined_gap,
 )
 from .tile_task import (
     NORMAL_DTYPE,
@@ -733,6 +735,11 @@ def _tile_line(result, done, total, pace=""):
 
 
 def _refine_line(result, done, total, pace=""):
+    if result["beyond"]:
+        log.info("tile %d (%d/%d): its gap under the cut, or an earlier neighbour's, lies "
+                 "beyond the halo; refined once the cut's gaps are measured%s",
+                 result["tile"], done, total, pace)
+        return
     log.info("refined tile %d (%d/%d): %d core + %d halo points, %d kept fixed, %d swaps, "
              "Hausdorff %.4g -> %.4g, %.1f s%s", result["tile"], done, total,
              result["n_core"], result["n_halo"], result["n_fixed"], result["swaps"],
@@ -1187,10 +1194,14 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress, edge_r
     One task per tile for the cut's Hausdorff distance ``G`` per tile (refinement needs ``G``
     within the halo), then the refinement in phases (:func:`refine_phases`): one graph in which
     each tile waits for its neighbours of earlier phases, whose refined flags it reads; the
-    rest run in parallel, largest first (:func:`_tile_tasks`). The cut, its key and ``G`` are
-    saved in the store, and each tile's refined flags with the key and ``G``, so a resumed run
-    refines only the tiles still missing for this cut (flags are a fixed function of the cut,
-    so those saved stay valid). ``edge_radius``: the flags' cover
+    rest run in parallel, largest first (:func:`_tile_tasks`). Where the cut's gaps are
+    expected within the halo (:func:`~.tile_refine.gaps_expected_within`) the first stage is
+    folded into the second: each tile measures its own gap before it refines, and ``G`` is
+    their maximum if every one lies within the halo; else ``G`` is measured and every tile
+    refined again in views that wide. The cut, its key and ``G`` are saved in the store, and
+    each tile's refined flags with the key, the view's width and its gap, so a resumed run
+    refines only the tiles still missing for this cut (flags are a fixed function of the cut
+    and the width, so those saved stay valid). ``edge_radius``: the flags' cover
     (:func:`~tiledsimplify.core.refine.edge_cover_radius`).
     """
     t0 = time.perf_counter()
@@ -1199,6 +1210,36 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress, edge_r
     if ts.run_attrs.get("cut_key") != key:
         ts.set_run_attrs({"cut": cut, "cut_key": key, "cut_hausdorff": None})
     g = ts.run_attrs.get("cut_hausdorff")
+
+    def refine(hausdorff, width):
+        phase = refine_phases(ts.plan, width)
+        # a tile waits for its neighbours of earlier phases alone, not for every earlier tile
+        earlier = {i: [int(j) for j in ts.neighbours(i, width) if phase[j] < phase[i]]
+                   for i in range(ts.n_tiles)}
+        pending = [i for i in range(ts.n_tiles) if not is_refined(ts, i, key, width)]
+        done = []
+        if pending:
+            done = _compute(_tile_tasks(refine_tile, sorted(pending, key=lambda i: phase[i]),
+                                        ts.count, lambda i: (str(store_path), i, hausdorff,
+                                                             earlier[i], width, edge_radius),
+                                        earlier.get),
+                            scheduler, workers, client, progress, "refine", _refine_line,
+                            points=sum(ts.count(i) for i in pending))
+        return done, pending, int(phase.max()) + 1 if len(phase) else 0
+
+    share = 1.0 - sum(cut) / max(ts.n_total, 1)
+    if g is None and gaps_expected_within(ts.halo, ts.spacing, share):
+        done, pending, n_phases = refine(None, ts.halo)  # each tile measures its own gap
+        gaps = [d["gap"] for d in done if not d["beyond"]] + [
+            refined_gap(ts, i) for i in set(range(ts.n_tiles)) - set(pending)]
+        if len(gaps) == ts.n_tiles and all(x is not None and x <= ts.halo for x in gaps):
+            g = max(gaps, default=0.0)
+            ts.set_run_attrs({"cut_hausdorff": g})
+            log.info("refined %d tiles in %d phases (cut Hausdorff %.4g) in %.1f s",
+                     len(pending), n_phases, g, time.perf_counter() - t0)
+            return True
+        log.info("a tile's gap under the cut lies beyond the halo (%.4g): measuring the cut's "
+                 "gaps, then refining every tile again", ts.halo)
     if g is None:
         def gaps(width):
             done = _compute(_tile_tasks(cut_hausdorff, range(ts.n_tiles), ts.count,
@@ -1217,22 +1258,9 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress, edge_r
             log.info("the cut leaves points %.4g from the nearest kept point, beyond the halo "
                      "(%.4g): the tiles refine in views that wide", g, ts.halo)
         ts.set_run_attrs({"cut_hausdorff": g})
-    width = refine_width(ts.halo, g)
-    phase = refine_phases(ts.plan, width)
-    n_phases = int(phase.max()) + 1 if len(phase) else 0
-    # a tile waits for its neighbours of earlier phases alone, not for every earlier tile
-    earlier = {i: [int(j) for j in ts.neighbours(i, width) if phase[j] < phase[i]]
-               for i in range(ts.n_tiles)}
-    pending = [i for i in range(ts.n_tiles) if not is_refined(ts, i, key, g)]
-    n_done = len(pending)
-    if pending:
-        _compute(_tile_tasks(refine_tile, sorted(pending, key=lambda i: phase[i]), ts.count,
-                             lambda i: (str(store_path), i, g, earlier[i], width, edge_radius),
-                             earlier.get),
-                 scheduler, workers, client, progress, "refine", _refine_line,
-                 points=sum(ts.count(i) for i in pending))
-    log.info("refined %d tiles in %d phases (cut Hausdorff %.4g) in %.1f s", n_done, n_phases,
-             g, time.perf_counter() - t0)
+    _, pending, n_phases = refine(g, refine_width(ts.halo, g))
+    log.info("refined %d tiles in %d phases (cut Hausdorff %.4g) in %.1f s", len(pending),
+             n_phases, g, time.perf_counter() - t0)
     return True
 
 

@@ -8,7 +8,13 @@ refines after the global cut, one task per tile, in two stages:
    kept points of core and halo). Their maximum ``G`` is the cut's global Hausdorff distance;
    refinement needs a view of each tile ``G`` wide (below): the halo, or where ``G`` is wider
    (small ratios) a view of that width read from the neighbours' cores, after a second pass
-   at that width makes ``G`` exact (:func:`refine_width`).
+   at that width makes ``G`` exact (:func:`refine_width`). Where the cut's gaps are expected
+   within the halo (the kept share not too small, :func:`gaps_expected_within`) this stage
+   is folded into the next: each tile measures its own gap under the cut in its view first
+   (``refine_tile(..., hausdorff=None)``) and the run checks afterwards that every gap lay
+   within the halo — then ``G`` is their maximum and the flags are those the two stages give
+   (the same views, phases and flags: ``G`` only sets the width) — or else measures ``G`` as
+   above and refines every tile again in views that wide.
 2. :func:`refine_tile`, in **phases** (:func:`refine_phases`): a greedy colouring, tiles with
    the most neighbours first, of the graph that joins two tiles when one's view reaches the
    other's core. A tile
@@ -49,6 +55,7 @@ docs/measurements.md). A wider halo does not close the cut's face gaps.
 """
 
 import collections
+import math
 import threading
 import time
 
@@ -112,35 +119,64 @@ def clear_kept():
         _kept_cache.clear()
 
 
-def _view(store, tile, cut, refined=(), width=None):
-    """Core and halo of a tile with the kept flags it sees: ``(xyz, keep, n_core)``. Halo
-    points of the tiles in ``refined`` (earlier phases) as they refined them, the rest as the
-    cut keeps them. ``width``: the halo's (default the store's, :meth:`TileStore.tile_halo`;
-    a wider one is read from the neighbours' cores, :func:`refine_width`)."""
+def _view_points(store, tile, width=None):
+    """Core and halo points of a tile's view: ``(xyz, n_core, owner, row)`` — the halo's
+    points are ``core(owner)[row]``. ``width``: the halo's (default the store's,
+    :meth:`TileStore.tile_halo`; a wider one is read from the neighbours' cores,
+    :func:`refine_width`)."""
     core_xyz = store.core_xyz(tile)
     if width is None or width <= store.halo:
         halo_xyz, _, owner, row = store.tile_halo(tile)
     else:
         halo_xyz, _, owner, row = store.halo_points(tile, width, owners=True)
-    keep = np.zeros(len(core_xyz) + len(halo_xyz), dtype=bool)
-    keep[:len(core_xyz)] = _kept(store, tile, cut)
-    halo_keep = keep[len(core_xyz):]
+    return np.concatenate([core_xyz, halo_xyz]), len(core_xyz), owner, row
+
+
+def _view_keep(store, tile, cut, n_core, owner, row, refined=(), width=None):
+    """The kept flags a tile's view sees (:func:`_view_points`): halo points of the tiles in
+    ``refined`` (earlier phases) as they refined them in views ``width`` wide, the rest as
+    the cut keeps them."""
+    keep = np.zeros(n_core + len(owner), dtype=bool)
+    keep[:n_core] = _kept(store, tile, cut)
+    halo_keep = keep[n_core:]
     refined = {int(j) for j in refined}
     for j in np.unique(owner):
         at = owner == j
-        halo_keep[at] = (_refined(store, int(j)) if int(j) in refined
+        halo_keep[at] = (_refined(store, int(j), width) if int(j) in refined
                          else _kept(store, int(j), cut))[row[at]]
-    return np.concatenate([core_xyz, halo_xyz]), keep, len(core_xyz)
+    return keep
 
 
-def _refined(store, tile):
+def _view(store, tile, cut, refined=(), width=None):
+    """Core and halo of a tile with the kept flags it sees: ``(xyz, keep, n_core)``
+    (:func:`_view_points`, :func:`_view_keep`)."""
+    xyz, n_core, owner, row = _view_points(store, tile, width)
+    return xyz, _view_keep(store, tile, cut, n_core, owner, row, refined, width), n_core
+
+
+def _refined(store, tile, width=None):
     got = store.read_refined(tile)
     key = store.run_attrs["cut_key"]
-    if got is None or got[1].get("cut_key") != key:
+    if got is None or got[1].get("cut_key") != key or (
+            width is not None and got[1].get("width") != _width(store, width)):
         raise IncompleteStoreError(
             f"{store.path}: tile {tile} has no refined kept flags for this cut, but a tile of "
             "a later phase reads them; refine the phases in order (run again to resume).")
     return got[0]
+
+
+def _width(store, width):
+    """The width of a view as saved with the refined flags: the store's halo by default."""
+    return float(store.halo if width is None else width)
+
+
+def largest_gap(xyz, keep, n_core):
+    """The largest distance from a core point (the first ``n_core`` of ``xyz``) to the kept
+    points (inf if none is kept; 0 if every core point is kept)."""
+    gone = xyz[:n_core][~keep[:n_core]]  # a kept core point is 0 from the kept points
+    if not gone.size:
+        return 0.0
+    return float(cKDTree(xyz[keep]).query(gone)[0].max()) if keep.any() else np.inf
 
 
 def refine_phases(plan, halo):
@@ -160,6 +196,25 @@ def refine_phases(plan, halo):
         used = {int(phase[j]) for j in nbrs[i] if phase[j] >= 0}
         phase[i] = next(c for c in range(len(used) + 1) if c not in used)
     return phase
+
+
+#: the cut's gaps are expected within the halo when this many times the kept points' spacing
+#: (the cloud's over the square root of the kept share) is within it
+#: (:func:`gaps_expected_within`). Measured ``G``: 5.4 / 8.1 / 12.2 / 31 spacings at 20 / 10 /
+#: 5 / 2 % kept on the 1M-point scan of ``benchmarks/speed.py`` (:func:`refine_width`), 2.4 /
+#: 2.6 / 2.7 / 4.4 times the kept points' spacing; 5.2 spacings (2.3 times) on the 1M-point
+#: scan of ``benchmarks/pipeline_speed.py`` at 20 %. At 3, a default halo (10 spacings)
+#: expects them within it from 9 % kept
+GAP_SPACINGS = 3.0
+
+
+def gaps_expected_within(halo, spacing, share):
+    """Whether the cut's gaps are expected within ``halo`` (model units) for a cloud of
+    ``spacing`` keeping ``share`` of its points: :data:`GAP_SPACINGS` times the kept points'
+    spacing within it. Only a guess — which way the run measures ``G`` (see the module
+    notes); a wrong one costs time, never a wrong result."""
+    return bool(share > 0 and spacing > 0
+                and GAP_SPACINGS * spacing / math.sqrt(share) <= halo)
 
 
 def refine_width(halo, hausdorff):
@@ -196,11 +251,8 @@ def cut_hausdorff(store_path, tile, width=None):
     store = TileStore.open(store_path)
     cut, _ = _cut(store)
     xyz, keep, n_core = _view(store, tile, cut, width=width)
-    h = 0.0
-    gone = xyz[:n_core][~keep[:n_core]]  # a kept core point is 0 from the kept points
-    if gone.size:
-        h = float(cKDTree(xyz[keep]).query(gone)[0].max()) if keep.any() else np.inf
-    return {"tile": int(tile), "hausdorff": h, "seconds": time.perf_counter() - t0}
+    return {"tile": int(tile), "hausdorff": largest_gap(xyz, keep, n_core),
+            "seconds": time.perf_counter() - t0}
 
 
 def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, edge_radius=0.0,
@@ -211,45 +263,61 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, edge_radius
     ----------
     store_path : str
     tile : int
-    hausdorff : float
-        ``G``, the cut's global Hausdorff distance (saved with the flags: it names the cut's
-        state the refinement started from, see the module notes).
+    hausdorff : float or None
+        ``G``, the cut's global Hausdorff distance, if it was measured (:func:`cut_hausdorff`
+        over every tile). None: not measured — the tile first measures its own gap under the
+        cut in its view, and refines only if that lies within the view's width; the run
+        checks afterwards that every tile's did (:func:`~tiledsimplify.pipeline.run` refines
+        so when the cut's gaps are expected within the halo, see the module notes).
     earlier : sequence of int
         The neighbours of ``tile`` in earlier phases: their refined flags are read (they must
-        be saved), the cut's for every other neighbour.
+        be saved, for the same cut and width), the cut's for every other neighbour.
     width : float, optional
         The view's halo width, :func:`refine_width` (default: the store's halo).
     edge_radius : float
         The tile's flagged core points are brought and kept within this distance of a kept
         point (:func:`~tiledsimplify.core.refine.edge_cover_radius` of the run's spacing and
         ratio; 0: no cover), as the untiled core does.
-    after : sequence, ignored
-        The scheduler's handle on the tasks that refine ``earlier`` (their results), so that
-        this one runs after them.
+    after : sequence
+        The results of the tasks that refine ``earlier`` (passed by the scheduler, so that
+        this one runs after them). With ``hausdorff`` None, if one of them was not refined
+        (its gap lay beyond the view), neither is this tile: it would read their flags.
 
     Returns
     -------
     dict
         ``tile``, ``n_core``, ``n_halo``, ``n_fixed`` (core points that must stay, of those
-        kept), ``swaps``, ``hausdorff_before`` and ``hausdorff_after`` (over the tile's core)
-        and ``seconds``.
+        kept), ``swaps``, ``hausdorff_before`` and ``hausdorff_after`` (over the tile's core),
+        ``gap`` (the tile's largest gap under the cut, with ``hausdorff`` None; else None),
+        ``beyond`` (True: not refined, as the gap, or an earlier neighbour's, lay beyond the
+        view) and ``seconds``.
 
     Notes
     -----
     Reads the cut (:meth:`TileStore.run_attrs` ``cut``, ``cut_key``), the results of the
     tile and of the tiles its halo comes from, and the refined flags of ``earlier``; writes
-    :meth:`TileStore.write_refined` with attrs ``cut_key``, ``hausdorff`` and ``scheme``, so
-    that a resumed run keeps exactly the tiles refined for the same cut.
+    :meth:`TileStore.write_refined` with attrs ``cut_key``, ``width``, ``gap`` and
+    ``scheme``: the flags are a fixed function of the cut and the width, so a resumed run
+    keeps exactly the tiles refined for the same cut in views as wide.
     """
     t0 = time.perf_counter()
     compile_cache.wait()  # a compile ahead running on this machine
     store = TileStore.open(store_path)
     cut, key = _cut(store)
-    xyz, keep, n_core = _view(store, tile, cut, earlier, width)
-    info = {"swaps": 0, "hausdorff_before": 0.0, "hausdorff_after": 0.0}
+    view_width = _width(store, width)
+    xyz, n_core, owner, row = _view_points(store, tile, width)
+    out = {"tile": int(tile), "n_core": int(n_core), "n_halo": int(len(xyz) - n_core),
+           "n_fixed": 0, "swaps": 0, "hausdorff_before": 0.0, "hausdorff_after": 0.0,
+           "gap": None, "beyond": False}
+    if hausdorff is None and any(r.get("beyond") for r in after if isinstance(r, dict)):
+        out.update(beyond=True, seconds=time.perf_counter() - t0)
+        return out
+    keep = _view_keep(store, tile, cut, n_core, owner, row, earlier, width)
     fixed = np.ones(len(xyz), dtype=bool)
     fixed[:n_core] = store.read_result(tile, "fixed")
     core_keep = keep[:n_core]
+    info = {"swaps": 0, "hausdorff_before": 0.0, "hausdorff_after": 0.0}
+    before = np.zeros(len(xyz)) if hausdorff is None else None
     if n_core:
         addable = np.zeros(len(xyz), dtype=bool)
         addable[:n_core] = True
@@ -257,22 +325,64 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, edge_radius
         edges[:n_core] = store.read_result(tile, "boundary")
         refined, info = refine_coverage(xyz, keep, fixed, addable=addable, watch=~addable,
                                         tie=coordinate_hash(xyz), edges=edges,
-                                        edge_radius=edge_radius)
+                                        edge_radius=edge_radius, before_out=before)
         core_keep = refined[:n_core]
-    store.write_refined(tile, core_keep, {"cut_key": key, "hausdorff": float(hausdorff),
-                                          "scheme": SCHEME})
-    return {"tile": int(tile), "n_core": int(n_core), "n_halo": int(len(xyz) - n_core),
-            "n_fixed": int((fixed[:n_core] & keep[:n_core]).sum()), "swaps": int(info["swaps"]),
-            "hausdorff_before": float(info["hausdorff_before"]),
-            "hausdorff_after": float(info["hausdorff_after"]),
-            "seconds": time.perf_counter() - t0}
+    if hausdorff is None:  # the tile's gap under the cut: within the view, it is exact
+        out["gap"] = gap = _cut_gap(store, tile, cut, xyz, n_core, owner, row, before,
+                                    earlier, width)
+        if not gap <= view_width:  # the refinement may have been unsafe: not saved
+            out.update(beyond=True, seconds=time.perf_counter() - t0)
+            return out
+    store.write_refined(tile, core_keep, {"cut_key": key, "width": view_width,
+                                          "gap": out["gap"], "scheme": SCHEME})
+    out.update(n_fixed=int((fixed[:n_core] & keep[:n_core]).sum()), swaps=int(info["swaps"]),
+               hausdorff_before=float(info["hausdorff_before"]),
+               hausdorff_after=float(info["hausdorff_after"]),
+               seconds=time.perf_counter() - t0)
+    return out
 
 
-def is_refined(store, tile, key, hausdorff):
-    """Whether ``tile`` was refined, by this scheme, for the cut ``key`` with this ``G``."""
+def _cut_gap(store, tile, cut, xyz, n_core, owner, row, before, earlier, width):
+    """The tile's largest gap under the cut (:func:`largest_gap` of the cut's view) from
+    ``before``, the distances in the view the refinement started from (its earlier
+    neighbours' halo points as they refined them).
+
+    Without earlier neighbours the two views are the same. Else they differ in halo points
+    alone, which lie outside the tile's box: a core point nearer to its nearest kept point
+    in ``before`` than to the box's faces has that nearest in the core, kept in both views,
+    and no halo point nearer (nor, by the same argument, under the cut), so its distance is
+    the same under the cut; only the others — a band along the faces — are measured again.
+    """
+    d = before[:n_core]
+    if not len(earlier) or not n_core:
+        return float(d.max(initial=0.0))
+    t = store._tile(tile)
+    lo, hi = store.plan.lo[t], store.plan.hi[t]
+    core = xyz[:n_core]
+    to_face = np.minimum(core - lo, hi - core).min(axis=1)
+    band = np.flatnonzero(~(d < to_face))
+    inner = float(np.delete(d, band).max(initial=0.0))
+    if not band.size:
+        return inner
+    cut_keep = _view_keep(store, tile, cut, n_core, owner, row, (), width)
+    if not cut_keep.any():
+        return np.inf
+    return max(inner, float(cKDTree(xyz[cut_keep]).query(core[band])[0].max()))
+
+
+def is_refined(store, tile, key, width):
+    """Whether ``tile`` was refined, by this scheme, for the cut ``key`` in a view ``width``
+    wide."""
     got = store.read_refined(tile)
     return got is not None and got[1].get("cut_key") == key and \
-        got[1].get("hausdorff") == hausdorff and got[1].get("scheme") == SCHEME
+        got[1].get("width") == float(width) and got[1].get("scheme") == SCHEME
+
+
+def refined_gap(store, tile):
+    """The tile's largest gap under the cut, as saved with its refined flags when it was
+    measured there (None otherwise)."""
+    got = store.read_refined(tile)
+    return None if got is None else got[1].get("gap")
 
 
 def refined_mask(store):
