@@ -264,6 +264,45 @@ def test_create_reports_progress_of_both_passes(tmp_path):
     assert [k for k, _ in calls] == [1] * 5 + [2] * 5  # pass 1 ends before pass 2 starts
 
 
+def test_an_input_that_fits_the_buffer_is_read_once(tmp_path):
+    # the ingest's second pass is handed the first pass's chunks when they hold at most
+    # buffer_points points together (no second read and decompression); a larger input is
+    # read again; the store is the same either way
+    from tiledsimplify.tiles.store import _ReadOnce
+    xyz = clustered(25_000, seed=5)
+    attrs = {"i": np.arange(25_000, dtype=np.int32)}
+    reads = []
+
+    def counted(source):
+        def read():
+            reads.append(1)
+            yield from source()
+        return read
+
+    once = TileStore.create(tmp_path / "once", counted(make_chunks(xyz, attrs, 7_000)),
+                            tile_points=5_000, config={}, provenance={}, sample_size=5_000)
+    assert len(reads) == 1
+    twice = TileStore.create(tmp_path / "twice", counted(make_chunks(xyz, attrs, 7_000)),
+                             tile_points=5_000, config={}, provenance={}, sample_size=5_000,
+                             buffer_points=24_999)
+    assert len(reads) == 3
+    check_partition(once, xyz)
+    assert once.n_tiles == twice.n_tiles > 1
+    for t in range(once.n_tiles):
+        for a, b in zip(once.core(t), twice.core(t), strict=True):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(once.attrs(t)["i"], twice.attrs(t)["i"])
+    # a first pass that did not end keeps nothing; the kept chunks are handed out once
+    source = _ReadOnce(make_chunks(xyz, size=7_000), 10 ** 6)
+    first = source()
+    next(first)
+    first.close()
+    assert source._kept is None
+    assert sum(len(c[1]) for c in source()) == 25_000
+    assert [c[0] for c in source()] == [0, 7_000, 14_000, 21_000]  # the kept ones
+    assert source._kept is None
+
+
 def check_random_case(n, tile_frac, chunk, seed, dup):
     # tile_points from n/40 (at most ~80 tiles, to keep the test fast) to 2 n (one tile)
     tile_points = max(1, int(round(n * tile_frac)))
@@ -596,8 +635,9 @@ def test_interrupted_ingest_is_detected(tmp_path):
             yield s, xyz[s:s + 5_000], {}
 
     path = tmp_path / "s"
-    with pytest.raises(KeyboardInterrupt):
-        TileStore.create(path, source, tile_points=2_000, config={}, provenance={})
+    with pytest.raises(KeyboardInterrupt):  # (an input larger than the buffer is read twice)
+        TileStore.create(path, source, tile_points=2_000, config={}, provenance={},
+                         buffer_points=10_000)
     with pytest.raises(IncompleteStoreError, match="(?s)incomplete.*[Dd]elete.*--store"):
         TileStore.open(path)
     assert issubclass(IncompleteStoreError, (TiledSimplifyError, OSError))
@@ -651,6 +691,8 @@ def test_bad_input(tmp_path, bad, msg):
     elif bad == "shape":
         parts[1] = (500, xyz[500:, :2], {"a": np.zeros(500, np.int16)})
     passes = {"n": 0}
+    if bad == "second_pass":  # an input that fits in buffer_points is read once
+        kw["buffer_points"] = 999
 
     def source():
         passes["n"] += 1

@@ -488,6 +488,43 @@ def _read_ahead(chunks: Iterable):
         thread.join()
 
 
+class _ReadOnce:
+    """A chunk source that a small input is read from once: its first full pass keeps the
+    chunks if they hold at most ``max_points`` points together, and the next pass (the
+    ingest's second) is handed those instead of reading and decoding the input again; a
+    larger input is read again. The kept chunks are released once handed out.
+
+    The 1M-point LAZ scan of ``benchmarks/pipeline_speed.py`` is one chunk, whose reading and
+    decompression took ~0.2 s of each pass. Only for an ingest in this process: parts read
+    elsewhere (processes, a cluster) are read as before."""
+
+    def __init__(self, source, max_points: int):
+        self._source = source
+        self._max = int(max_points)
+        self._kept = None
+
+    def __call__(self):
+        if self._kept is not None:
+            kept, self._kept = self._kept, None
+            return iter(kept)
+        return self._first()
+
+    def _first(self):
+        kept, total = [], 0
+        for item in self._source():
+            if kept is not None:
+                try:
+                    total += len(item[1])
+                except TypeError:  # not a chunk: the ingest's checks name the problem
+                    total = self._max + 1
+                if total <= self._max:
+                    kept.append(item)
+                else:
+                    kept = None
+            yield item
+        self._kept = kept  # only once every chunk was read
+
+
 def _scan_part(part, sample_size: int, seed: int, limit: int | None, progress=None) -> dict:
     """Pass 1 of the ingest over one part of the input: its chunks' ``(start, size)``, its
     bounds, its sample (the part's smallest keys, below ``limit`` if given: :class:`_BottomK`)
@@ -702,8 +739,10 @@ class TileStore:
         ``sample_size`` points (bottom-k of a seeded hash of the global index: a reservoir
         sample independent of how the input is chunked). From the sample it estimates the
         point spacing (:func:`estimate_spacing`) and plans the tiles (:func:`plan_tiles`).
-        Pass 2 reads the chunks again, assigns each point to its tile and appends it to the
-        tile's arrays. ``complete`` is set in the root attributes only at the very end.
+        Pass 2 reads the chunks again (an input of at most ``buffer_points`` points read in
+        this process is kept from pass 1 instead, :class:`_ReadOnce`), assigns each point to
+        its tile and appends it to the tile's arrays. ``complete`` is set in the root
+        attributes only at the very end.
 
         Parameters
         ----------
@@ -734,7 +773,8 @@ class TileStore:
             clamped to 4,096..65,536.
         buffer_points : int, default 2_000_000
             Maximum points held in the write buffer across all tiles (each tile's rows are
-            buffered until a whole zarr chunk can be written).
+            buffered until a whole zarr chunk can be written); an input of at most this many
+            points is read once.
         overwrite : bool, default False
             Replace an existing tile store at ``path``.
         progress : callable, optional
@@ -807,6 +847,7 @@ class TileStore:
         in_process = map_parts is None
         if in_process:
             map_parts = _map_here(progress)
+            parts = [_ReadOnce(part, buffer_points) for part in parts]
 
         # ---- pass 1: count, cover check, bounds, sample (one task per part)
         def scan_parts(limit):
