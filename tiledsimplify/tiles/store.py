@@ -751,7 +751,10 @@ class TileStore:
             be an existing tile store.
         chunks : callable
             ``chunks()`` returns a fresh iterable of ``(start_index, xyz, attrs)``; it is
-            called twice and must give the same chunks both times.
+            called twice (once if the input fits in ``buffer_points``) and must give the same
+            chunks both times. Each chunk's arrays must be its own, not a buffer the source
+            fills again for the next chunk: the next chunk is read while this one is used,
+            and a small input's chunks are kept for the second pass.
         tile_points : int
             Target maximum number of points per tile core.
         halo : float, optional
