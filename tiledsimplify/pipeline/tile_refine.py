@@ -155,10 +155,12 @@ def _view(store, tile, cut, refined=(), width=None):
 
 
 def _refined(store, tile, width=None):
+    """A tile's refined kept flags, which a tile of a later phase reads: they must have been
+    made for this cut, in views as wide (``width``; the store's halo by default)."""
     got = store.read_refined(tile)
     key = store.run_attrs["cut_key"]
-    if got is None or got[1].get("cut_key") != key or (
-            width is not None and got[1].get("width") != _width(store, width)):
+    if got is None or got[1].get("cut_key") != key or \
+            got[1].get("width") != _width(store, width):
         raise IncompleteStoreError(
             f"{store.path}: tile {tile} has no refined kept flags for this cut, but a tile of "
             "a later phase reads them; refine the phases in order (run again to resume).")
