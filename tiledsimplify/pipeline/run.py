@@ -1230,10 +1230,11 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress, edge_r
     share = 1.0 - sum(cut) / max(ts.n_total, 1)
     if g is None and gaps_expected_within(ts.halo, ts.spacing, share):
         done, pending, n_phases = refine(None, ts.halo)  # each tile measures its own gap
-        gaps = [d["gap"] for d in done if not d["beyond"]] + [
+        measured = [d["gap"] for d in done if not d["beyond"]] + [
             refined_gap(ts, i) for i in set(range(ts.n_tiles)) - set(pending)]
-        if len(gaps) == ts.n_tiles and all(x is not None and x <= ts.halo for x in gaps):
-            g = max(gaps, default=0.0)
+        if len(measured) == ts.n_tiles and all(x is not None and x <= ts.halo
+                                               for x in measured):
+            g = max(measured, default=0.0)
             ts.set_run_attrs({"cut_hausdorff": g})
             log.info("refined %d tiles in %d phases (cut Hausdorff %.4g) in %.1f s",
                      len(pending), n_phases, g, time.perf_counter() - t0)

@@ -442,8 +442,9 @@ def _read_ahead(chunks: Iterable):
     """``chunks``' items, the next one read in a thread while the caller works on this one:
     the 10M-point LAZ scan's ingest 8.2-8.9 s against 8.7-9.4 (5 alternating pairs,
     2026-12-05; decompression and the LAS fields' copies beside the sorting and writing). At
-    most two chunks in memory: the one handed out and the one being read. An error of the reader is raised where its item
-    would have come; a caller that stops early stops the reader, which closes ``chunks``."""
+    most two chunks in memory: the one handed out and the one being read. An error of the
+    reader is raised where its item would have come; a caller that stops early stops the
+    reader, which closes ``chunks``."""
     import queue
     import threading
     items: queue.Queue = queue.Queue()
