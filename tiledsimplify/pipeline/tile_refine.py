@@ -6,15 +6,20 @@ refines after the global cut, one task per tile, in two stages:
 
 1. :func:`cut_hausdorff`: each tile's Hausdorff distance under the cut (its core points to the
    kept points of core and halo). Their maximum ``G`` is the cut's global Hausdorff distance;
-   refinement needs a view of each tile ``G`` wide (below): the halo, or where ``G`` is wider
-   (small ratios) a view of that width read from the neighbours' cores, after a second pass
-   at that width makes ``G`` exact (:func:`refine_width`). Where the cut's gaps are expected
-   within the halo (the kept share not too small, :func:`gaps_expected_within`) this stage
-   is folded into the next: each tile measures its own gap under the cut in its view first
-   (``refine_tile(..., hausdorff=None)``) and the run checks afterwards that every gap lay
-   within the halo — then ``G`` is their maximum and the flags are those the two stages give
-   (the same views, phases and flags: ``G`` only sets the width) — or else measures ``G`` as
-   above and refines every tile again in views that wide.
+   refinement needs a view of each tile at least ``G`` wide (below): the halo, or where the
+   gaps are wider (small ratios) a view of their maximum's width read from the neighbours'
+   cores (:func:`refine_width`). A gap measured in a view the halo wide is exact if within
+   it; one beyond may be overstated (its nearest kept point beyond the view), never
+   understated, so the maximum is then a bound of ``G`` — and views that wide are safe.
+   (Until 2026-12-05 a second pass measured ``G`` exactly in views that wide first: at 5–1 %
+   kept it cost more than the bound's extra width, which was 5–10 % on the 1M-point scan.)
+   Where the cut's gaps are expected within the halo (the kept share not too small,
+   :func:`gaps_expected_within`) this stage is folded into the next: each tile measures its
+   own gap under the cut in its view first (``refine_tile(..., hausdorff=None)``) and the run
+   checks afterwards that every gap lay within the halo — then ``G`` is their maximum and the
+   flags are those the two stages give (the same views, phases and flags: ``G`` only sets the
+   width) — or else measures the gaps of the tiles that did not (none measured twice) and
+   refines every tile again in views as wide as their maximum.
 2. :func:`refine_tile`, in **phases** (:func:`refine_phases`): a greedy colouring, tiles with
    the most neighbours first, of the graph that joins two tiles when one's view reaches the
    other's core. A tile
@@ -221,9 +226,10 @@ def gaps_expected_within(halo, spacing, share):
 
 def refine_width(halo, hausdorff):
     """The width of the view a tile refines in: the store's ``halo``, or the cut's Hausdorff
-    distance ``G`` where that is wider (the refinement must see every point within ``G`` of
-    a point it removes, see the module notes). None: ``G`` is beyond :data:`MAX_WIDTH` halos
-    (or infinite), too wide a view to read; there is no refinement then.
+    distance ``G`` (or a bound of it, see the module notes) where that is wider (the
+    refinement must see every point within ``G`` of a point it removes). None: beyond
+    :data:`MAX_WIDTH` halos (or infinite), too wide a view to read; there is no refinement
+    then.
 
     Below ~7 % kept the cut's ``G`` outgrows the default halo of 10 spacings (the 1M-point
     scan of ``benchmarks/speed.py``: ``G`` 5.4 / 8.1 / 12.2 / 31 spacings at 20 / 10 / 5 / 2
