@@ -613,6 +613,16 @@ def test_a_cut_wider_than_the_halo_is_refined_in_views_that_wide(bunny, tmp_path
     assert gap("a.npy") < 0.9 * gap("cut.npy")
     run(path, tmp_path / "b.npy", scheduler="synchronous", **kw)
     assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
+    # views read with their points by owner and row (TileStore.near_points), as before by
+    # global index: the same output
+    def by_index(store, tile, width=None):
+        halo_xyz, _, owner, row = store.halo_points(tile, width, owners=True)
+        core_xyz = store.core_xyz(tile)
+        return np.concatenate([core_xyz, halo_xyz]), len(core_xyz), owner, row
+    with monkeypatch.context() as m:
+        m.setattr(tile_refine, "_view_points", by_index)
+        run(path, tmp_path / "d.npy", scheduler="synchronous", **kw)
+    assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "d.npy").read_bytes()
     # the gaps expected within the halo, wrongly: the tiles measure them while refining, find
     # some beyond, and the run measures G and refines every tile again, as above
     # (the gaps the tiles measured are not measured again)

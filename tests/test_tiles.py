@@ -550,6 +550,26 @@ def test_halo_points_match_brute_force(sp_data, sp_store):
     assert sp_store.halo_points(0)[1].size > 0
 
 
+def test_near_points_are_the_halo_points_by_owner_and_row(sp_data, sp_store):
+    """near_points (a wide view of the refinement) holds what halo_points does — the same
+    points, owners and rows, by brute force too — ordered by owner, then row, without the
+    neighbours' indices."""
+    xyz, _ = sp_data
+    plan = sp_store.plan
+    for width in (sp_store.halo, 0.05, 0.2):
+        for t in range(sp_store.n_tiles):
+            got_xyz, owner, row = sp_store.near_points(t, width)
+            hx, hj, ho, hr = sp_store.halo_points(t, width, owners=True)
+            order = np.lexsort((hr, ho))
+            assert np.array_equal(owner, ho[order]) and np.array_equal(row, hr[order])
+            assert np.array_equal(got_xyz, hx[order])
+            for j in np.unique(owner):
+                at = owner == j
+                assert np.array_equal(sp_store.core_xyz(int(j))[row[at]], got_xyz[at])
+            near = ((xyz >= plan.lo[t] - width) & (xyz <= plan.hi[t] + width)).all(axis=1)
+            assert len(got_xyz) == int(near.sum()) - sp_store.count(t)
+
+
 def test_tile_halo_is_saved_once_and_read_back_the_same(sp_data, tmp_path):
     # a store of its own: the module's store must stay free of saved halos for the others
     xyz, attrs = sp_data

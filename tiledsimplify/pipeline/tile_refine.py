@@ -128,12 +128,12 @@ def _view_points(store, tile, width=None):
     """Core and halo points of a tile's view: ``(xyz, n_core, owner, row)`` — the halo's
     points are ``core(owner)[row]``. ``width``: the halo's (default the store's,
     :meth:`TileStore.tile_halo`; a wider one is read from the neighbours' cores,
-    :func:`refine_width`)."""
+    :meth:`TileStore.near_points`, :func:`refine_width`)."""
     core_xyz = store.core_xyz(tile)
     if width is None or width <= store.halo:
         halo_xyz, _, owner, row = store.tile_halo(tile)
     else:
-        halo_xyz, _, owner, row = store.halo_points(tile, width, owners=True)
+        halo_xyz, owner, row = store.near_points(tile, width)
     return np.concatenate([core_xyz, halo_xyz]), len(core_xyz), owner, row
 
 
