@@ -178,6 +178,37 @@ def test_watched_points_are_never_added_and_never_left_worse_than_the_level(seed
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
+def test_watched_points_beyond_reach_are_left_out_without_changing_the_result(seed,
+                                                                             monkeypatch):
+    # a tile's wide view: most watched points (another tile's removed points) lie nearer to
+    # their own kept points than to the tile's box; the pass leaves them out (_drop_inert),
+    # with the same swaps, distances and Hausdorff as when it searched them every round
+    from tiledsimplify.core import refine as refine_module
+    rng = np.random.default_rng(seed)
+    X = _wavy(4000, seed)
+    keep = rng.random(4000) < 0.1
+    other = X[:, 0] > 1.2
+    watch = other & ~keep
+    dropped = []
+    real = refine_module._drop_inert
+
+    def spy(X, keep, fixed, addable, ignored, watched, dist):
+        before = watched.sum()
+        real(X, keep, fixed, addable, ignored, watched, dist)
+        dropped.append(before - watched.sum())
+    monkeypatch.setattr(refine_module, "_drop_inert", spy)
+    got = np.full(4000, np.nan)
+    out, info = refine_coverage(X, keep, other, addable=~other, watch=watch, before_out=got)
+    assert dropped[0] > watch.sum() // 2 and info["swaps"] > 0
+    monkeypatch.setattr(refine_module, "_drop_inert", lambda *a: None)
+    ref_got = np.full(4000, np.nan)
+    ref, ref_info = refine_coverage(X, keep, other, addable=~other, watch=watch,
+                                    before_out=ref_got)
+    assert np.array_equal(out, ref) and info == ref_info
+    np.testing.assert_array_equal(got, ref_got)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
 def test_thin_below_with_scaled_rows_matches_naive(seed):
     # the flags' cap: rows whose distances count more may end only that much nearer
     rng, X, cand, removable, tie, nd, nbr = _thin_case(seed)

@@ -440,6 +440,7 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
     info["hausdorff_before"] = H
     if not H > 0:
         return keep, info
+    _drop_inert(X, keep, fixed, addable, ignored, watched, dist)
     # cells that hold every radius asked below: H only drops, and levels are below it
     grid = cell_grid.CellGrid(X, H * (1.0 + 4.0 * cell_grid.COVER))
     tree_x = _once(lambda: cKDTree(X))
@@ -479,6 +480,28 @@ def refine_coverage(X, keep, fixed, *, addable=None, watch=None, tie=None, step=
         H = float(dist[~watched].max())
     info["hausdorff_after"] = H
     return keep, info
+
+
+def _drop_inert(X, keep, fixed, addable, ignored, watched, dist):
+    """Take out of the pass (in place: ``ignored``, not ``watched``, distance 0) the watched
+    points nearer to their nearest kept point than to the box of every point that may be
+    added or removed: that nearest is fixed, and nothing added can come nearer, so they never
+    change owner nor hold back a removal — the result is the same without them.
+
+    A tile's view wider than its halo (small ratios, :mod:`..pipeline.tile_refine`) is
+    mostly such points: other tiles' removed points, covered by kept points of their own
+    tile. Each round searched their nearest candidates all the same."""
+    w = np.flatnonzero(watched)
+    active = addable | (keep & ~fixed)
+    if not w.size or not active.any():
+        return
+    A = X[active]
+    lo, hi = A.min(axis=0), A.max(axis=0)
+    out = np.maximum(np.maximum(lo - X[w], X[w] - hi), 0.0)  # per axis, beyond the box
+    inert = w[np.sqrt((out * out).sum(axis=1)) > dist[w]]
+    ignored[inert] = True
+    watched[inert] = False
+    dist[inert] = 0.0
 
 
 def _distances(X, keep, ignored):
