@@ -559,7 +559,7 @@ def test_near_points_are_the_halo_points_by_owner_and_row(sp_data, sp_store):
     for width in (sp_store.halo, 0.05, 0.2):
         for t in range(sp_store.n_tiles):
             got_xyz, owner, row = sp_store.near_points(t, width)
-            hx, hj, ho, hr = sp_store.halo_points(t, width, owners=True)
+            hx, _, ho, hr = sp_store.halo_points(t, width, owners=True)
             order = np.lexsort((hr, ho))
             assert np.array_equal(owner, ho[order]) and np.array_equal(row, hr[order])
             assert np.array_equal(got_xyz, hx[order])
