@@ -298,7 +298,7 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, edge_radius
         kept), ``swaps``, ``hausdorff_before`` and ``hausdorff_after`` (over the tile's core),
         ``gap`` (the tile's largest gap under the cut, with ``hausdorff`` None; else None),
         ``beyond`` (True: not refined, as the gap, or an earlier neighbour's, lay beyond the
-        view) and ``seconds``.
+        view; ``n_halo`` 0 where the view was not read) and ``seconds``.
 
     Notes
     -----
@@ -313,13 +313,14 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, edge_radius
     store = TileStore.open(store_path)
     cut, key = _cut(store)
     view_width = _width(store, width)
-    xyz, n_core, owner, row = _view_points(store, tile, width)
-    out = {"tile": int(tile), "n_core": int(n_core), "n_halo": int(len(xyz) - n_core),
-           "n_fixed": 0, "swaps": 0, "hausdorff_before": 0.0, "hausdorff_after": 0.0,
-           "gap": None, "beyond": False}
+    out = {"tile": int(tile), "n_core": store.count(tile), "n_halo": 0, "n_fixed": 0,
+           "swaps": 0, "hausdorff_before": 0.0, "hausdorff_after": 0.0, "gap": None,
+           "beyond": False}
     if hausdorff is None and any(r.get("beyond") for r in after if isinstance(r, dict)):
-        out.update(beyond=True, seconds=time.perf_counter() - t0)
+        out.update(beyond=True, seconds=time.perf_counter() - t0)  # its view is not read
         return out
+    xyz, n_core, owner, row = _view_points(store, tile, width)
+    out["n_halo"] = int(len(xyz) - n_core)
     keep = _view_keep(store, tile, cut, n_core, owner, row, earlier, width)
     fixed = np.ones(len(xyz), dtype=bool)
     fixed[:n_core] = store.read_result(tile, "fixed")

@@ -1219,31 +1219,22 @@ class TileStore:
         owner, row : ndarray of int64, shape (h,)
             Only with ``owners``: ``core(owner[p])`` holds point ``p`` at ``row[p]``.
         """
-        t = self._tile(tile)
-        h = self.halo if halo is None else float(halo)
-        lo, hi = self.plan.lo[t] - h, self.plan.hi[t] + h
-        xs, js = [np.zeros((0, 3))], [np.zeros(0, dtype=np.int64)]
-        ts, rs = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
-        for j in self.plan.neighbours(t, h):
-            if not self.tile_counts[j]:
-                continue
-            xyz, idx = self.core(j)
-            sel = _in_box(xyz, lo, hi)
-            xs.append(xyz[sel])
-            js.append(idx[sel])
-            ts.append(np.full(sel.size, j, dtype=np.int64))
-            rs.append(sel.astype(np.int64))
-        xyz, idx = np.concatenate(xs), np.concatenate(js)
+        xyz, owner, row = self.near_points(tile, self.halo if halo is None else halo)
+        idx = np.empty(len(row), dtype=np.int64)
+        ends = np.flatnonzero(np.diff(owner)) + 1  # near_points gives them owner by owner
+        for at in np.split(np.arange(len(row)), ends):
+            if at.size:
+                idx[at] = self.core_index(int(owner[at[0]]))[row[at]]
         order = np.argsort(idx, kind="stable")
         if owners:
-            return xyz[order], idx[order], np.concatenate(ts)[order], np.concatenate(rs)[order]
+            return xyz[order], idx[order], owner[order], row[order]
         return xyz[order], idx[order]
 
     def near_points(self, tile: int, width: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The points of other tiles within ``width`` of this tile's box (the expanded-box test
-        of :meth:`halo_points`) and where each is stored: ``(xyz, owner, row)``, ``core(owner)``
-        holding each at ``row`` — ordered by owner, then row, so the neighbours' indices are
-        not read.
+        of :meth:`halo_points`, which adds their indices) and where each is stored: ``(xyz,
+        owner, row)``, ``core(owner)`` holding each at ``row`` — ordered by owner, then row,
+        so the neighbours' indices are not read.
 
         A view wider than the saved halo for the gap refinement (:mod:`..pipeline.tile_refine`,
         whose result does not depend on the order of a view's points): on the 1M-point scan
