@@ -294,3 +294,45 @@ def test_load_counts_the_members_of_the_cells_around_the_queries():
         assert grid.load(everyone, qs) == pytest.approx(np.mean(want))
         assert grid.load(members, qs) == pytest.approx(np.mean([around(i, members) for i in qs]))
     assert grid.load(None, np.zeros(0, dtype=np.int64)) == 0.0
+
+
+@pytest.mark.parametrize("name,X", list(_nearest_clouds()),
+                         ids=lambda v: v if isinstance(v, str) else "")
+def test_distances_to_members_equal_the_kd_tree_bit_for_bit(name, X):
+    X = np.unique(X, axis=0)
+    rng = np.random.default_rng(4)
+    n = len(X)
+    for share in (0.5, 0.2, 0.02):
+        members = np.flatnonzero(rng.random(n) < share)
+        if not members.size:
+            members = np.array([0])
+        queries = np.flatnonzero(rng.random(n) < 0.8)
+        want = cKDTree(X[members]).query(X[queries])[0]
+        for sample in (16, 4096):
+            got = cell_grid.distances_to(X, members, queries, sample=sample)
+            np.testing.assert_array_equal(got, want)
+
+
+def test_distances_to_members_beyond_the_cells_and_in_overfull_cells(monkeypatch):
+    """Members in one corner: most queries' nearest lies beyond the cells around them (the
+    kd-tree answers those); a sample that guesses cells far too large leaves all to it."""
+    rng = np.random.default_rng(5)
+    X = np.unique(rng.random((20000, 2)) @ np.eye(2, 3), axis=0)
+    members = np.flatnonzero((X[:, :2] < 0.3).all(axis=1))
+    queries = np.arange(len(X))
+    want = cKDTree(X[members]).query(X)[0]
+    asked = []
+    real = cell_grid.nearest
+
+    def nearest(*args):
+        got = real(*args)
+        asked.append(int(got[2].sum()))  # queries whose nearest lies beyond their cells
+        return got
+
+    monkeypatch.setattr(cell_grid, "nearest", nearest)
+    np.testing.assert_array_equal(cell_grid.distances_to(X, members, queries), want)
+    assert asked and asked[0] > len(X) // 2
+    asked.clear()
+    np.testing.assert_array_equal(cell_grid.distances_to(X, members, queries, factor=400.0),
+                                  want)
+    assert not asked  # the cells would hold every member: the kd-tree alone

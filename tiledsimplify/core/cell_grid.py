@@ -512,10 +512,7 @@ def nearest_other(X, sample=4096, seed=0, factor=4.0):
     out = np.full(n, np.inf)
     if n < 2:
         return out
-    m = min(n, int(sample))
-    S = X[np.random.default_rng(seed).choice(n, m, replace=False)] if m < n else X
-    guess = float(np.median(cKDTree(S).query(S, k=2)[0][:, 1])) * np.sqrt(m / n)
-    grid = CellGrid(X, factor * guess)
+    grid = CellGrid(X, factor * _spacing_guess(X, sample, seed))
     probe = np.arange(0, n, max(1, n // int(sample)))  # strided, not the guess's sample
     if grid.load(None, probe) > NEAREST_MAX_LOAD:
         return cKDTree(X).query(X, k=2)[0][:, 1]
@@ -526,3 +523,53 @@ def nearest_other(X, sample=4096, seed=0, factor=4.0):
     if miss.size:
         out[miss] = cKDTree(X).query(X[miss], k=2)[0][:, 1]
     return out
+
+
+def _spacing_guess(P, sample, seed):
+    """The median distance between nearest points of ``P`` (n ≥ 2), guessed from a random
+    ``sample``: its own nearest distances times ``sqrt(sample / n)``, as on a surface."""
+    from scipy.spatial import cKDTree
+    n = P.shape[0]
+    m = min(n, int(sample))
+    S = P[np.random.default_rng(seed).choice(n, m, replace=False)] if m < n else P
+    return float(np.median(cKDTree(S).query(S, k=2)[0][:, 1])) * np.sqrt(m / n)
+
+
+#: :func:`distances_to` asks the kd-tree alone below this many members
+FEW_MEMBERS = 64
+
+
+def distances_to(X, members, queries, sample=4096, seed=0, factor=3.0):
+    """The distance from each of ``queries`` (point ids) to the nearest of ``members`` (point
+    ids, not empty), exactly as ``cKDTree(X[members]).query(X[queries])[0]`` gives it, bit
+    for bit.
+
+    On a grid of cells ``factor`` times the members' spacing (guessed as
+    :func:`nearest_other` guesses a cloud's), with the kd-tree only for the queries whose
+    nearest member lies beyond the cells around them (the kd-tree alone where the cells would
+    hold too many members: :data:`NEAREST_MAX_LOAD`). The gap refinement's first distances
+    (:func:`.refine.refine_coverage`): a 140k-point tile of the 1M scan at 20 % kept 28-30 ms
+    against the kd-tree's 58, at 2 % 27 against 40 (2026-12-05).
+    """
+    from scipy.spatial import cKDTree
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    members = np.asarray(members, dtype=np.int64)
+    queries = np.asarray(queries, dtype=np.int64)
+    if members.size < FEW_MEMBERS or queries.size < FEW_MEMBERS:
+        return cKDTree(X[members]).query(X[queries])[0]
+    grid = CellGrid(X, factor * _spacing_guess(X[members], sample, seed))
+    at = np.zeros(X.shape[0], dtype=bool)
+    at[queries] = True
+    q = grid.pt[at[grid.pt]]  # the queries cell by cell
+    if grid.load(members, q[::max(1, q.size // int(sample))]) > NEAREST_MAX_LOAD:
+        return cKDTree(X[members]).query(X[queries])[0]
+    start, slot, xyz = grid.members(X, members)
+    d1, _, amb1, _, _, _, _ = nearest(X[q], grid.cell_of[q], grid.near_start, grid.near,
+                                      start, slot, xyz, grid.reach * grid.reach, 0, 0.0,
+                                      np.zeros(members.size, dtype=np.uint64))
+    miss = np.flatnonzero(amb1)
+    if miss.size:
+        d1[miss] = cKDTree(X[members]).query(X[q[miss]])[0]
+    out = np.empty(X.shape[0])
+    out[q] = d1
+    return out[queries]

@@ -505,8 +505,12 @@ def _drop_inert(X, keep, fixed, addable, ignored, watched, dist):
 
 
 def _distances(X, keep, ignored):
-    """Every point's distance to the kept points (inf if none is kept), 0 where ignored."""
-    dist = cKDTree(X[keep]).query(X)[0] if keep.any() else np.full(X.shape[0], np.inf)
+    """Every point's distance to the kept points (inf if none is kept), 0 where ignored, as
+    the kd-tree gives it (:func:`.cell_grid.distances_to`)."""
+    dist = np.zeros(X.shape[0]) if keep.any() else np.full(X.shape[0], np.inf)
+    if keep.any():
+        counted = np.flatnonzero(~ignored)
+        dist[counted] = cell_grid.distances_to(X, np.flatnonzero(keep), counted)
     dist[ignored] = 0.0
     return dist
 

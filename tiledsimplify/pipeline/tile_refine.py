@@ -67,7 +67,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..core import compile_cache
+from ..core import cell_grid, compile_cache
 from ..core.heap import coordinate_hash
 from ..core.refine import refine_coverage
 from ..tiles import IncompleteStoreError, TileStore
@@ -180,10 +180,12 @@ def _width(store, width):
 def largest_gap(xyz, keep, n_core):
     """The largest distance from a core point (the first ``n_core`` of ``xyz``) to the kept
     points (inf if none is kept; 0 if every core point is kept)."""
-    gone = xyz[:n_core][~keep[:n_core]]  # a kept core point is 0 from the kept points
+    gone = np.flatnonzero(~keep[:n_core])  # a kept core point is 0 from the kept points
     if not gone.size:
         return 0.0
-    return float(cKDTree(xyz[keep]).query(gone)[0].max()) if keep.any() else np.inf
+    if not keep.any():
+        return np.inf
+    return float(cell_grid.distances_to(xyz, np.flatnonzero(keep), gone).max())
 
 
 def refine_phases(plan, halo):
