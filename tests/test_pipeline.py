@@ -71,6 +71,17 @@ def test_global_cut_matches_sorting_every_step(monkeypatch, collect):
             assert global_cut(seqs, n_remove) == want
             assert budget.plan_cut(seqs, n_remove, dict.fromkeys(seqs, True),
                                    scan=scan)[0] == want
+            passes = []  # with a bound of the steps: one pass where it is within COLLECT
+
+            def counted(lo, bits, final, scan=scan, passes=passes):
+                passes.append(final)
+                return scan(lo, bits, final)
+            assert budget.plan_cut(seqs, n_remove, dict.fromkeys(seqs, True), scan=counted,
+                                   most=total)[0] == want
+            if total <= collect:
+                assert passes == [True]
+            else:
+                assert passes[0] is False and (len(passes) >= 2 or min(n_remove, total) == 0)
 
 
 def test_global_cut_holds_one_tile_at_a_time(monkeypatch):

@@ -143,15 +143,7 @@ def _select(scan, rank, counts=None):
             if bits == 0:
                 return lo, below, equal
             if final:
-                kept = got["kept"]
-                every = np.concatenate(list(kept.values()))
-                level = every[np.argpartition(every, rank - 1)[rank - 1]]
-                del every
-                for t, k in kept.items():
-                    i = int(np.searchsorted(k, level, side="left"))
-                    below[t] += i
-                    equal[t] = int(np.searchsorted(k, level, side="right")) - i
-                return int(level), below, equal
+                return _select_kept(got, rank)
             hist = got["hist"]
         cum = np.cumsum(hist)
         d = int(np.searchsorted(cum, rank, side="left"))
@@ -159,6 +151,21 @@ def _select(scan, rank, counts=None):
         size = int(hist[d])
         lo += d << shift
         bits = shift
+
+
+def _select_kept(got, rank):
+    """:func:`_select`'s end: the ``rank``-th smallest of the keys a final pass kept, in
+    memory — ``(key, below, equal)`` with ``below`` counting the keys before the pass's range
+    too."""
+    below, equal, kept = got["below"], got["equal"], got["kept"]
+    every = np.concatenate(list(kept.values()))
+    level = every[np.argpartition(every, rank - 1)[rank - 1]]
+    del every
+    for t, k in kept.items():
+        i = int(np.searchsorted(k, level, side="left"))
+        below[t] += i
+        equal[t] = int(np.searchsorted(k, level, side="right")) - i
+    return int(level), below, equal
 
 
 class _Cut(NamedTuple):
@@ -169,21 +176,28 @@ class _Cut(NamedTuple):
     top: dict  # tile -> the largest known running maximum (-inf: no step known)
 
 
-def _cut(sequences, n_remove, scan=None):
+def _cut(sequences, n_remove, scan=None, most=None):
     """The cut over the known steps (:class:`_Cut`), one tile in memory at a time; ``scan``
-    runs a pass of the selection over every tile (default: :func:`count_pass` here)."""
+    runs a pass of the selection over every tile (default: :func:`count_pass` here).
+
+    ``most``: at most this many steps in all, if known. At most :data:`COLLECT`, the first
+    pass keeps every key and the selection ends in memory: one pass over the tiles instead
+    of two (the 1M scan's cut: ~0.07 s of each pass a reading of every tile's steps and
+    importances)."""
     tiles = sorted(sequences)
     if scan is None:
         def scan(lo, bits, final):
             return count_pass(sequences, tiles, lo, bits, final)
-    first = scan(0, 64, False)  # the first pass of the selection, with each tile's size, top
+    collect = most is not None and most <= COLLECT
+    first = scan(0, 64, collect)  # the first pass of the selection, with each tile's size, top
     size, top, hist = first["size"], first["top"], first["hist"]
     total = sum(size.values())
     take = min(max(int(n_remove), 0), total)
     prefix = {t: 0 for t in tiles}
     if take == 0:
         return _Cut(prefix, -np.inf, -1, n_remove > total, top)
-    key, below, equal = _select(scan, take, counts=hist)
+    key, below, equal = (_select_kept(first, take) if collect
+                         else _select(scan, take, counts=hist))
     rest = take
     for t in tiles:  # every step below the level, then ties at the level by tile, step
         prefix[t] = below[t]
@@ -268,12 +282,13 @@ def deeper_tiles(sequences, n_remove, exhausted, known=None):
     return _deeper(_cut(sequences, n_remove), sequences, n_remove, exhausted, known)
 
 
-def plan_cut(sequences, n_remove, exhausted, known=None, scan=None):
+def plan_cut(sequences, n_remove, exhausted, known=None, scan=None, most=None):
     """:func:`global_cut` and :func:`deeper_tiles` from one selection: ``(prefix, need)``;
     ``scan(lo, bits, final)``, if given, runs each pass of the selection over every tile
     (:func:`count_pass`; on a cluster, :func:`store_pass` on its workers, merged by
-    :func:`merge_passes`)."""
-    cut = _cut(sequences, n_remove, scan)
+    :func:`merge_passes`); ``most``: at most this many steps in all, if known (one pass
+    where at most :data:`COLLECT`)."""
+    cut = _cut(sequences, n_remove, scan, most)
     return cut.prefix, _deeper(cut, sequences, n_remove, exhausted, known)
 
 
