@@ -1116,8 +1116,11 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         n_deeper = 0
         for _ in range(3):  # the sequences are read from the store a tile at a time
             seqs, exhausted, known = store_sequences(ts)
-            prefix, need = plan_cut(seqs, n - target, exhausted, known,  # a step a point
-                                    _cut_scan(str(store_path), sorted(seqs), client), n)
+            # at most a step a point; a cluster's passes count on its workers instead of
+            # sending every key to this client
+            prefix, need = plan_cut(seqs, n - target, exhausted, known,
+                                    _cut_scan(str(store_path), sorted(seqs), client),
+                                    n if client is None else None)
             if not need:
                 break
             n_deeper += len(need)
