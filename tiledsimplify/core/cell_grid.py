@@ -20,6 +20,7 @@ round for the ~1 % of points with a tie.
 import numpy as np
 
 from ._jit import jit, jit_leaf
+from .bounds import box
 
 #: a point within (1 - COVER) h of another, in every coordinate, is at most one cell away
 #: (rounding of the cell index is far below this for up to MAX_CELLS cells per axis)
@@ -45,8 +46,8 @@ class CellGrid:
 
     def __init__(self, X, h):
         X = np.ascontiguousarray(X, dtype=np.float64)
-        lo = X.min(axis=0)
-        span = float((X.max(axis=0) - lo).max())
+        lo, hi = box(X)
+        span = float((hi - lo).max())
         self.h = h = max(float(h), span / MAX_CELLS, np.finfo(float).tiny)
         self.reach = (1.0 - COVER) * h
         key, step = _cell_keys(X, lo, h)

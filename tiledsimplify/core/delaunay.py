@@ -34,6 +34,7 @@ LAS tiles build even without the jitter. Tests compare the edges with Qhull's.
 import numpy as np
 
 from ._jit import jit, jit_inline
+from .bounds import box
 
 #: vertices of face ``i`` (the face opposite vertex ``i``), ordered so that vertex ``i`` lies on
 #: the positive side of the face (:func:`_orient` > 0) in a positively oriented tetrahedron
@@ -106,8 +107,8 @@ def brio_order(P, seed=0):
     n = P.shape[0]
     rng = np.random.default_rng(seed)
     perm = rng.permutation(n)
-    lo = P.min(axis=0)
-    ext = max(float((P.max(axis=0) - lo).max()), 1e-300)
+    lo, hi = box(P)
+    ext = max(float((hi - lo).max()), 1e-300)
     q = np.minimum(((P - lo) / ext * 1023.0).astype(np.int64), 1023)
     code = np.zeros(n, dtype=np.int64)
     for bit in range(10):
@@ -433,8 +434,9 @@ def delaunay_tets(P, seed=0):
     n = P.shape[0]
     if n < 4 or n > MAX_POINTS:
         return None
-    c = 0.5 * (P.min(axis=0) + P.max(axis=0))
-    r = max(float(np.linalg.norm(P.max(axis=0) - P.min(axis=0))), 1e-300)
+    lo, hi = box(P)
+    c = 0.5 * (lo + hi)
+    r = max(float(np.linalg.norm(hi - lo)), 1e-300)
     M = 50.0 * r  # corners of a regular tetrahedron containing the ball of radius ~16 r
     corners = c + M * np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0],
                                 [-1.0, -1.0, 1.0]])

@@ -50,6 +50,7 @@ from scipy.spatial import cKDTree
 
 from . import cell_grid, heap
 from ._jit import jit
+from .bounds import box
 
 #: kept points whose boundary measure exceeds this many times the boundary threshold are never
 #: swapped out, besides boundary and frozen points (:func:`protected`). Edge candidates just
@@ -496,7 +497,7 @@ def _drop_inert(X, keep, fixed, addable, ignored, watched, dist):
     if not w.size or not active.any():
         return
     A = X[active]
-    lo, hi = A.min(axis=0), A.max(axis=0)
+    lo, hi = box(A)
     out = np.maximum(np.maximum(lo - X[w], X[w] - hi), 0.0)  # per axis, beyond the box
     inert = w[np.sqrt((out * out).sum(axis=1)) > dist[w]]
     ignored[inert] = True

@@ -19,6 +19,7 @@ from . import boundary as boundary_mod
 from . import cell_grid
 from . import edge_fit
 from . import prethin as prethin_mod
+from .bounds import box, finite_rows
 from .heap import coordinate_hash
 from .importance import MEASURES, all_importance, coverage_weight
 from .local_mesh import MAX_DN, all_local_meshes
@@ -46,7 +47,7 @@ def _validate(xyz, frozen):
     if not np.issubdtype(X.dtype, np.number) or np.issubdtype(X.dtype, np.complexfloating):
         raise InputError(f"points must be real numbers, got dtype {X.dtype}.")
     X = np.ascontiguousarray(X, dtype=np.float64)
-    bad = ~np.isfinite(X).all(axis=1)
+    bad = ~finite_rows(X)
     if bad.any():
         first = int(np.flatnonzero(bad)[0])
         raise InputError(f"points contain {int(bad.sum())} row(s) with NaN or infinite "
@@ -263,8 +264,7 @@ def _prepare(X, frozen):
     rep, inverse = distinct(X, frozen)
     m = rep.size
     P = X[rep]
-    lo = P.min(axis=0) if m else np.zeros(3)
-    hi = P.max(axis=0) if m else np.zeros(3)
+    lo, hi = box(P) if m else (np.zeros(3), np.zeros(3))
     Xu = np.ascontiguousarray(P - 0.5 * (lo + hi))
     return rep, inverse, Xu, scale_of(Xu)
 

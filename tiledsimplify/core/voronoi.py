@@ -60,6 +60,7 @@ from scipy.spatial import Delaunay, QhullError
 
 from . import adjacency, cell_grid
 from ._jit import jit, jit_leaf
+from .bounds import box, extent
 from .clip import area, clip, origin_distance2, square
 from .delaunay import delaunay_tets
 from .linalg import any_perpendicular
@@ -453,8 +454,8 @@ def guard_points(X, reach, rng_seed=54321):
     ``|y - g| >= |a - g| - |y - a| > 2 reach - reach >= |y - a|``, so no guard owns any part
     of a facet the reach rule looks at.
     """
-    lo = X.min(axis=0) - 3.0 * reach
-    hi = X.max(axis=0) + 3.0 * reach
+    lo, hi = box(X)
+    lo, hi = lo - 3.0 * reach, hi + 3.0 * reach
     pitch = 2.0 * reach
     shape = np.maximum(np.ceil((hi - lo) / pitch).astype(np.int64) + 1, 1)
     while np.prod(shape.astype(float)) > 2.0 * X.shape[0] + 1000:  # at most ~2 per point
@@ -584,7 +585,7 @@ def scale_of(X):
     core caps it at :data:`SCALE_SPACINGS` spacings, ``simplify._scale``)."""
     if X.shape[0] == 0:
         return 1.0
-    d = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0)))
+    d = float(np.linalg.norm(extent(X)))
     return d if d > 0.0 else 1.0
 
 

@@ -120,8 +120,10 @@ def distinct(X, frozen):
         within = np.lexsort((~frozen[rows], P[:, 2], P[:, 1], P[:, 0], run))
         order[at] = rows[within]
     P = X[order]
-    first = np.ones(n, dtype=bool)
-    first[1:] = (P[1:] != P[:-1]).any(axis=1)
+    first = np.zeros(n, dtype=bool)
+    first[:1] = True
+    for d in range(P.shape[1]):  # a column at a time: (P[1:] != P[:-1]).any(axis=1), faster
+        first[1:] |= P[1:, d] != P[:-1, d]
     inverse = np.empty(n, dtype=np.int64)
     inverse[order] = np.cumsum(first) - 1
     return order[first], inverse

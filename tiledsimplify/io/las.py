@@ -87,6 +87,7 @@ import laspy
 import numpy as np
 
 from .. import __version__
+from ..core import bounds
 from ..errors import FileFormatError, InputError
 from .las_pieces import _INT32, _XYZ, ChunkBackend, LasLayout, LasPiece, grow_header
 from .points_out import publish, write_failed
@@ -465,7 +466,7 @@ def _check_in_box(path, xyz, box, first):
     bounding box (:func:`_header_box`)."""
     if not len(xyz):
         return
-    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    lo, hi = bounds.box(xyz)
     if np.all(lo >= box[0]) and np.all(hi <= box[1]):
         return
     out = np.any((xyz < box[0]) | (xyz > box[1]), axis=1)

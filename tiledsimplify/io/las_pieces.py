@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import laspy
 import numpy as np
 
+from ..core.bounds import box
 from ..errors import InputError
 
 _XYZ = ("X", "Y", "Z")
@@ -152,7 +153,7 @@ class LasLayout:
         grid = np.round((xyz - offsets) / scales)
         if not np.isfinite(grid).all():
             raise InputError(f"{path}: xyz has NaN or infinite coordinates")
-        low, high = grid.min(axis=0), grid.max(axis=0)
+        low, high = box(grid)
         if (low < _INT32.min).any() or (high > _INT32.max).any():
             raise off_grid(path, xyz.min(axis=0), xyz.max(axis=0), scales, offsets)
         rec = laspy.ScaleAwarePointRecord.zeros(m, header=header)

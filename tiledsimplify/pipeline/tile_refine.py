@@ -68,6 +68,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core import cell_grid, compile_cache
+from ..core.bounds import row_min
 from ..core.heap import coordinate_hash
 from ..core.refine import refine_coverage
 from ..tiles import IncompleteStoreError, TileStore
@@ -370,7 +371,7 @@ def _cut_gap(store, tile, cut, xyz, n_core, owner, row, before, earlier, width):
     t = store._tile(tile)
     lo, hi = store.plan.lo[t], store.plan.hi[t]
     core = xyz[:n_core]
-    to_face = np.minimum(core - lo, hi - core).min(axis=1)
+    to_face = row_min(np.minimum(core - lo, hi - core))
     band = np.flatnonzero(~(d < to_face))
     inner = float(np.delete(d, band).max(initial=0.0))
     if not band.size:

@@ -61,6 +61,7 @@ from zarr.core.array import AsyncArray
 from zarr.core.group import GroupMetadata
 from zarr.storage import LocalStore, MemoryStore, StorePath
 
+from ..core.bounds import box
 from ..errors import InputError, TiledSimplifyError
 from .partition import TilePlan, plan_tiles
 
@@ -545,8 +546,9 @@ def _scan_part(part, sample_size: int, seed: int, limit: int | None, progress=No
             progress(read)
         if not m:
             continue
-        lo = np.minimum(lo, xyz.min(axis=0))
-        hi = np.maximum(hi, xyz.max(axis=0))
+        c_lo, c_hi = box(xyz)
+        lo = np.minimum(lo, c_lo)
+        hi = np.maximum(hi, c_hi)
         sampler.add(start, xyz)
     return {"points": read, "intervals": intervals, "lo": lo, "hi": hi, "keys": sampler.keys,
             "index": sampler.index, "xyz": sampler.xyz, "spec": check.spec}
