@@ -63,6 +63,7 @@ from zarr.storage import LocalStore, MemoryStore, StorePath
 
 from ..core.bounds import box
 from ..errors import InputError, TiledSimplifyError
+from .local_store import InlineStore
 from .partition import TilePlan, plan_tiles
 
 __all__ = [
@@ -593,7 +594,7 @@ def _lay_out_tiles(path: str, tiles, spec, chunk_rows: int, rows: int, progress=
     the store at ``path``, at once (zarr's concurrent metadata writes), where the parts of
     the input run. Returns ``{"points": 0}``."""
     nodes = _tile_nodes(tiles, TileStore._array_templates(spec, chunk_rows, rows))
-    dict(zarr.create_hierarchy(store=LocalStore(path), nodes=nodes))
+    dict(zarr.create_hierarchy(store=InlineStore(path), nodes=nodes))
     return {"points": 0}
 
 
@@ -628,7 +629,7 @@ def _fill_part(path: str, part, base: int, intervals, spec, buffer_points: int,
     this process; else made at a tile's first write from tile 0's metadata (every tile's
     array of a key has the same), read once per key. Returns the points read and the rows
     written per tile."""
-    store = LocalStore(path)
+    store = InlineStore(path)
     root = zarr.open_group(store, mode="r+")
     plan = TilePlan.from_dict(root.attrs["plan"])
     chunk_rows = int(root.attrs["chunk_rows"])
@@ -935,7 +936,7 @@ class TileStore:
                  for scan in scans]
         starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         attrs["part_starts"] = starts[:-1].tolist()
-        store = LocalStore(path)
+        store = InlineStore(path)
         root = zarr.open_group(store, mode="w", attributes=attrs)
         rows = int(starts[-1])
         dict(zarr.create_hierarchy(store=store, nodes={"tiles": GroupMetadata()}))
@@ -1043,7 +1044,7 @@ class TileStore:
         if not (path / "zarr.json").is_file():
             raise StoreError(f"no tile store at {path} (no zarr.json there)")
         try:
-            root = zarr.open_group(LocalStore(path), mode="r+")
+            root = zarr.open_group(InlineStore(path), mode="r+")
             attrs = dict(root.attrs)
         except (OSError, ValueError, KeyError) as exc:
             raise StoreError(f"{path} could not be opened as a zarr v3 group: {exc}") from exc
