@@ -132,3 +132,15 @@ def test_results_do_not_depend_on_the_input_order(data_dir):
     assert kept_a == kept_b
     np.testing.assert_array_equal(a.boundary[perm], b.boundary)
     np.testing.assert_array_equal(a.deviation[perm], b.deviation)
+
+
+def test_the_order_by_two_keys_is_lexsorts():
+    """:func:`_by_keys` (a stable sort by the first key, then the runs of ties by the second)
+    against ``np.lexsort``, with few distinct keys so that ties abound."""
+    from tiledsimplify.core.zorder import _by_keys
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        n = int(rng.integers(0, 2000))
+        hi = rng.integers(0, int(rng.integers(1, 40)), n).astype(np.uint64)
+        lo = rng.integers(0, int(rng.integers(1, 40)), n).astype(np.uint64)
+        np.testing.assert_array_equal(_by_keys(hi, lo), np.lexsort((lo, hi)))

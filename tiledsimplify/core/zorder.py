@@ -84,11 +84,30 @@ def _curve(X):
     return hi, lo
 
 
+def _by_keys(hi, lo):
+    """``np.lexsort((lo, hi))``: the stable order by ``hi``, then ``lo``. One stable sort by
+    ``hi``, then the runs of equal ``hi`` (rows closer than ~2**-21 of the box in every
+    coordinate: 4 % of a 140k-point tile of the 1M scan) by ``lo``: 3-4 ms against lexsort's
+    19 ms there (two 64-bit stable sorts of every row)."""
+    order = np.argsort(hi, kind="stable")
+    hs = hi[order]
+    same = hs[1:] == hs[:-1]
+    if same.any():
+        tie = np.zeros(hs.size, dtype=bool)
+        tie[1:] |= same
+        tie[:-1] |= same
+        at = np.flatnonzero(tie)
+        run = np.cumsum(np.r_[True, ~same])[at]  # which run of equal hi
+        rows = order[at]
+        order[at] = rows[np.lexsort((lo[rows], run))]  # stable: equal lo keep their order
+    return order
+
+
 def zorder(X):
     """Stable permutation of the rows of ``X`` (n, 3) that sorts them along the Z-order curve
     (ties: the order they came in)."""
     hi, lo = _curve(X)
-    return np.lexsort((lo, hi))
+    return _by_keys(hi, lo)
 
 
 def distinct(X, frozen):
@@ -105,7 +124,7 @@ def distinct(X, frozen):
     if n == 0:
         return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
     hi, lo = _curve(X)
-    order = np.lexsort((lo, hi))
+    order = _by_keys(hi, lo)
     hi, lo = hi[order], lo[order]
     tie = np.zeros(n, dtype=bool)  # sorted rows that share their key with a neighbour
     same_key = (hi[1:] == hi[:-1]) & (lo[1:] == lo[:-1])
