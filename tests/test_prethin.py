@@ -200,3 +200,15 @@ def test_refinement_runs_when_the_count_is_above_the_subset():
     assert res.stats["n_prethin_subset"] < 2000
     assert res.keep.sum() == 2000
     assert "refine_rounds" in res.stats
+
+
+def test_the_block_order_is_lexsorts():
+    """:func:`_block_order` (each block of BLOCK consecutive points by its tie keys, a block
+    at a time) against one ``np.lexsort`` over every point, ties included."""
+    from tiledsimplify.core.prethin import BLOCK, _block_order
+    rng = np.random.default_rng(5)
+    for n in (0, 1, BLOCK - 1, BLOCK, BLOCK + 1, 3 * BLOCK + 17):
+        for top in (5, 2 ** 63):
+            tie = rng.integers(0, top, n, dtype=np.uint64)
+            np.testing.assert_array_equal(_block_order(tie),
+                                          np.lexsort((tie, np.arange(n) // BLOCK)))

@@ -127,6 +127,17 @@ def _secant(r, k, last, aim, model):
     return r * (aim / k) ** (1.0 / slope)
 
 
+def _block_order(tie):
+    """``np.lexsort((tie, np.arange(n) // BLOCK))``: each block of :data:`BLOCK` consecutive
+    points in the order of ``tie`` (stable), a block at a time (one lexsort of every point took
+    ~11 ms of a 140k-point tile; its two keys each a stable sort of all)."""
+    n = tie.size
+    order = np.empty(n, dtype=np.int64)
+    for s in range(0, n, BLOCK):
+        order[s:s + BLOCK] = s + np.argsort(tie[s:s + BLOCK], kind="stable")
+    return order
+
+
 def subset(X, start, cnt, pool, fixed, goal, spacing, tie, least=0, first=None,
            max_radius=math.inf):
     """About ``goal`` points of ``X``: every ``fixed`` one and a disk sample of the rest, in
@@ -151,7 +162,7 @@ def subset(X, start, cnt, pool, fixed, goal, spacing, tie, least=0, first=None,
     free_goal = goal - n_fixed
     if free_goal <= 0 or goal > MAX_SHARE * n or not spacing > 0:
         return None
-    order = np.lexsort((tie, np.arange(n) // BLOCK)).astype(np.int64)
+    order = _block_order(tie)
     if first is not None:
         order = np.concatenate([order[first[order]], order[~first[order]]])
     keep = np.zeros(n, dtype=bool)
