@@ -610,6 +610,41 @@ def test_attributes_round_trip(sp_data, sp_store):
         sp_store.attrs(0, ["nope"])
 
 
+def test_a_format_2_store_reads_its_attributes_an_array_each(sp_data, tmp_path):
+    """Stores written before format 3 (one zarr array per attribute and tile) still open and
+    give the same attributes: made here from a format 3 store by rewriting its layout."""
+    import shutil
+
+    import zarr
+
+    from tiledsimplify.tiles.store import attribute_layout, unpack_attribute
+    xyz, attrs = sp_data
+    path = tmp_path / "old"
+    small = {k: v[:20_000] for k, v in attrs.items()}
+    new = TileStore.create(path, make_chunks(xyz[:20_000], small, 7_000), tile_points=5_000,
+                           config=CONFIG, provenance=PROVENANCE, sample_size=5_000)
+    want = [new.attrs(t) for t in range(new.n_tiles)]
+    root = zarr.open_group(str(path), mode="r+")
+    for t in range(new.n_tiles):
+        packed = root[f"tiles/{t}/attributes"]
+        rows = packed[:]
+        g = root.require_group(f"tiles/{t}/attrs")
+        spec = {k: (v["dtype"], tuple(v["shape"])) for k, v in root.attrs["attributes"].items()}
+        layout, _ = attribute_layout(spec)
+        for name in spec:
+            g.create_array(name, data=unpack_attribute(rows, layout[name]),
+                           chunks=(packed.chunks[0],) + layout[name][3])
+        shutil.rmtree(path / "tiles" / str(t) / "attributes")
+    root.update_attributes({"format_version": 2})
+    old = TileStore.open(path)
+    for t in range(old.n_tiles):
+        got = old.attrs(t)
+        assert list(got) == list(want[t])
+        for k in got:
+            assert got[k].dtype == want[t][k].dtype
+            np.testing.assert_array_equal(got[k], want[t][k])
+
+
 def test_root_attributes(sp_data, sp_store):
     xyz, _ = sp_data
     a = sp_store.root_attrs
@@ -789,27 +824,64 @@ def test_results_write_read_and_resume(tmp_path, monkeypatch):
 
 def test_arrays_made_from_known_metadata_write_what_zarr_reads(tmp_path):
     """A part of the input makes each tile's arrays from tile 0's metadata, without reading
-    their zarr.json (``_array_at``): what it writes there, zarr reads back."""
+    their zarr.json (``_array_at``): what it writes there, zarr reads back — the attributes
+    packed in rows of bytes and unpacked again."""
     import zarr
     from zarr.core.group import GroupMetadata
     from zarr.storage import LocalStore
 
-    from tiledsimplify.tiles.store import _array_at
+    from tiledsimplify.tiles.store import (
+        _array_at,
+        attribute_layout,
+        pack_attributes,
+        unpack_attribute,
+    )
     spec = {"intensity": (np.dtype("uint16"), ()), "rgb": (np.dtype("uint16"), (3,))}
     templates = TileStore._array_templates(spec, 1000, 5000)
+    assert sorted(templates) == ["attributes", "index", "xyz"]
     nodes = {"tiles": GroupMetadata()}
     for t in range(3):
         nodes[f"tiles/{t}"] = GroupMetadata()
-        nodes[f"tiles/{t}/attrs"] = GroupMetadata()
         for key, meta in templates.items():
             nodes[f"tiles/{t}/{key}"] = meta
     store = LocalStore(tmp_path)
     zarr.open_group(store, mode="w")
     dict(zarr.create_hierarchy(store=store, nodes=nodes))
-    meta = zarr.open_group(store, mode="r")["tiles/0/attrs/rgb"].metadata
+    meta = zarr.open_group(store, mode="r")["tiles/0/attributes"].metadata
+    layout, width = attribute_layout(spec)
+    assert width == 8
     rgb = np.arange(15, dtype=np.uint16).reshape(5, 3)
-    _array_at(store, "tiles/2/attrs/rgb", meta)[1000:1005] = rgb
-    back = zarr.open_group(store, mode="r")["tiles/2/attrs/rgb"]
-    assert back.shape == (5000, 3) and back.dtype == np.uint16
-    np.testing.assert_array_equal(back[1000:1005], rgb)
+    intensity = np.array([1, 2, 65535, 0, 7], dtype=np.uint16)
+    rows = pack_attributes({"rgb": rgb, "intensity": intensity}, layout, width, 5)
+    _array_at(store, "tiles/2/attributes", meta)[1000:1005] = rows
+    back = zarr.open_group(store, mode="r")["tiles/2/attributes"]
+    assert back.shape == (5000, 8) and back.dtype == np.uint8
+    np.testing.assert_array_equal(unpack_attribute(back[1000:1005], layout["rgb"]), rgb)
+    np.testing.assert_array_equal(unpack_attribute(back[1000:1005], layout["intensity"]),
+                                  intensity)
     assert not back[:1000].any() and not back[1005:].any()
+
+
+def test_packed_attributes_come_back_as_they_went_in():
+    from tiledsimplify.tiles.store import (
+        attribute_layout,
+        pack_attributes,
+        unpack_attribute,
+    )
+    rng = np.random.default_rng(8)
+    spec = {"flag": (np.dtype(bool), ()), "gps_time": (np.dtype("float64"), ()),
+            "pair": (np.dtype("int32"), (2,)), "c": (np.dtype("uint8"), ()),
+            "f": (np.dtype("float32"), (3,))}
+    layout, width = attribute_layout(spec)
+    assert width == 1 + 8 + 8 + 1 + 12
+    for m in (0, 1, 1000):
+        attrs = {"flag": rng.random(m) < 0.5, "gps_time": rng.normal(size=m) * 1e9,
+                 "pair": rng.integers(-2**31, 2**31, (m, 2)).astype(np.int32),
+                 "c": rng.integers(0, 256, m).astype(np.uint8),
+                 "f": rng.random((m, 3)).astype(np.float32)[:, ::-1]}  # not contiguous
+        rec = pack_attributes(attrs, layout, width, m)
+        assert rec.shape == (m, width)
+        for name, values in attrs.items():
+            got = unpack_attribute(rec, layout[name])
+            assert got.dtype == values.dtype and got.shape == values.shape
+            np.testing.assert_array_equal(got, values)
