@@ -708,9 +708,10 @@ def _fill_part(path: str, part, base: int, intervals, spec, buffer_points: int,
             counts = np.bincount(tile, minlength=plan.n_tiles)
             edges = np.concatenate([[0], np.cumsum(counts)])
             index = np.arange(start, start + m, dtype=np.int64)[order]
-            xyz_s = xyz[order]
+            # take: 2-3x faster than indexing rows with ``order`` (NumPy 2.4, 2026-12-05)
+            xyz_s = xyz.take(order, axis=0)
             attrs_s = ({"attributes": pack_attributes(a, layout, width, m).take(order, axis=0)}
-                       if spec else {})  # take: 2.7x faster than indexing rows here
+                       if spec else {})
             jobs = []
             for t in np.flatnonzero(counts):
                 s, e = edges[t], edges[t + 1]
