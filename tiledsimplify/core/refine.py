@@ -508,8 +508,10 @@ def _drop_inert(X, keep, fixed, addable, ignored, watched, dist):
 def _distances(X, keep, ignored):
     """Every point's distance to the kept points (inf if none is kept), 0 where ignored, as
     the kd-tree gives it (:func:`.cell_grid.distances_to`)."""
-    dist = np.zeros(X.shape[0]) if keep.any() else np.full(X.shape[0], np.inf)
-    if keep.any():
+    if not keep.any():
+        dist = np.full(X.shape[0], np.inf)
+    else:
+        dist = np.zeros(X.shape[0])
         counted = np.flatnonzero(~ignored)
         dist[counted] = cell_grid.distances_to(X, np.flatnonzero(keep), counted)
     dist[ignored] = 0.0

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.bounds import finite_rows
 from ..errors import FileFormatError, InputError
 from .las import LasSource, las_files, part_ranges
 from .mesh import _PLY_TYPES, _parse_ply_header, read_points
@@ -57,9 +58,7 @@ def colour_uint16(values, code):
 def check_finite(xyz, start, files):
     """``xyz`` (a chunk starting at input row ``start``) if every coordinate is finite; else an
     :class:`InputError` naming the file, the first bad point and how many the chunk holds."""
-    if np.isfinite(xyz).all():  # the usual case: one pass, no per-row test
-        return xyz
-    bad = ~np.isfinite(xyz).all(axis=1)
+    bad = ~finite_rows(xyz)
     if bad.any():
         rows = np.flatnonzero(bad)
         name = str(files[0]) if files else "the input"
@@ -331,7 +330,7 @@ class TextPart:
                 xyz = np.ascontiguousarray(got[:, :3])
                 attrs = {las: colour_uint16(got[:, 3 + j], code)
                          for j, (las, (_, code)) in enumerate(zip(PLY_COLOURS, self.colour or ()))}
-                bad = np.flatnonzero(~np.isfinite(xyz).all(axis=1))
+                bad = np.flatnonzero(~finite_rows(xyz))
                 if bad.size:  # "nan" and "inf" parse: name the line, as for a bad one
                     i = int(bad[0])
                     line = first + i if numbers is None else numbers[i]

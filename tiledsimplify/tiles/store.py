@@ -120,7 +120,7 @@ def attribute_layout(spec) -> tuple[dict[str, tuple[int, int, np.dtype, tuple]],
     packed row of bytes (format 3): ``({name: (offset, size, dtype, trail)}, row width)``.
 
     One array of rows instead of an array per attribute: the 1M LAS scan's twelve attributes
-    were twelve zarr arrays a tile to lay out, write and read (each array ~1.5-3 ms of zarr's
+    were twelve zarr arrays a tile to lay out, write and read (each array ~1.5-2 ms of zarr's
     own work), and twelve gathers a chunk in the ingest."""
     out, off = {}, 0
     for name, (dtype, trail) in spec.items():
