@@ -25,6 +25,13 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    when it lies within ``width`` local spacings of that line (local spacing: the median
    nearest-neighbour distance over the two-ring) — ``SOFT_WIDTH`` of that where the faces
    fold by less than ``SOFT_ANGLE`` (:func:`band`).
+   **Corners** (since 2026-12-05): where that fit flags no point (no edge within ``width``,
+   or a farther one) but flags one in its two-ring, the two-ring is split into three planes
+   (:func:`_fit_corner`) — where an edge bends (a polygonal hole's rim), where three faces
+   meet, where an edge ends on a face, two planes fit no two-ring — and the nearest line of
+   two of them that fold sharply, meet and are not a thin wall's parallel faces is the
+   point's. Points so flagged are flags, not the core band (step 4), and lend no line (steps
+   3-4): a corner's line ends at the corner.
 3. **Borrowed edges** — a candidate that its own fit does not flag (the fit failed, or found
    another, farther edge) is located by the line of a flagged neighbour on a sharp edge
    (:func:`borrow`).
@@ -492,6 +499,142 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
     return _line_distance(X, p, line), fold
 
 
+#: a face of a three-plane fit (:func:`_fit_corner`) may deviate from its plane by at most this
+#: RMS (local spacings): a curved patch of a few spacings' radius (a small hole, a boss) fits
+#: three planes folding by more than the least fold within ``MAX_RMS``; 0.3 measured on the
+#: 38 quality cases (docs/measurements.md, "Corners: three faces in a two-ring")
+CORNER_RMS = 0.3
+
+
+@jit_leaf
+def _dot(a, i, b, j):
+    return a[i, 0] * b[j, 0] + a[i, 1] * b[j, 1] + a[i, 2] * b[j, 2]
+
+
+@jit
+def _fit_corner(X, normals, idx, c, side, cen, nrm, work, spacing, line, tmp, max_cos, proj,
+                outer):
+    """Three-plane k-means of ``idx[:c]``: ``(distance, angle)`` from ``idx[0]`` to the nearest
+    line where two of three fitted faces meet at a sharp edge, ``line`` holding it (``inf``
+    and ``line`` untouched where there is none).
+
+    Beyond the paper. At a corner — where an edge bends (a polygonal hole's rim), where three
+    faces meet, where an edge ends on a face — a two-ring holds three faces, and the two-plane
+    fit of :func:`_fit_edge` finds no edge (no two planes fit it) or the edge of the two largest
+    faces, farther than the point's own. Seeds, among the outer half of the two-ring (by
+    distance from ``idx[0]``: nearer the corner every one-ring normal mixes faces): the normal
+    least parallel to ``idx[0]``'s, the one least parallel to that, and the one least
+    parallel to both (none if that is within the least fold of either); ``ROUNDS`` of
+    assigning each point to the nearest plane and refitting. Each face needs ``MIN_SIDE``
+    points, an RMS distance of at most ``CORNER_RMS`` spacings to its plane and a spread of
+    ``MIN_SPREAD``; no two of the planes may be nearer parallel than the least fold (a thin
+    wall's two faces and its rim are two edges, the two-plane fit's, not a corner); a pair of
+    faces makes an edge where each has a point within a spacing of their line (faces that meet
+    there, not two faces the third separates), its fold taken as :func:`_fit_edge` takes it.
+    ``cen``, ``nrm``: (3, 3) work arrays; ``tmp``: a work line; ``proj``, ``outer``: work
+    arrays of length ``c`` or more (float, int).
+    """
+    p = idx[0]
+    # seeds from the outer half of the two-ring: near the corner every normal mixes faces
+    for j in range(c):
+        dx, dy, dz = X[idx[j], 0] - X[p, 0], X[idx[j], 1] - X[p, 1], X[idx[j], 2] - X[p, 2]
+        proj[j] = dx * dx + dy * dy + dz * dz
+    half = np.median(proj[:c])
+    m = 0
+    for j in range(c):
+        if proj[j] >= half:
+            outer[m] = idx[j]
+            m += 1
+    a = _least_parallel(normals, outer, m, p)
+    b = _least_parallel(normals, outer, m, a)
+    t = -1
+    best = 2.0
+    for j in range(m):
+        q = outer[j]
+        v = max(abs(_dot(normals, a, normals, q)), abs(_dot(normals, b, normals, q)))
+        if v < best:
+            best = v
+            t = q
+    if t < 0 or best > max_cos or abs(_dot(normals, a, normals, b)) > max_cos:
+        return np.inf, 0.0
+    for j in range(c):
+        q = idx[j]
+        da = abs(_dot(normals, a, normals, q))
+        db = abs(_dot(normals, b, normals, q))
+        dt = abs(_dot(normals, t, normals, q))
+        side[j] = 0 if da >= db and da >= dt else (1 if db >= dt else 2)
+    for _ in range(ROUNDS):
+        for which in range(3):
+            if _plane_fit(X, idx, c, side, which, cen[which], nrm[which], work) < MIN_SIDE:
+                return np.inf, 0.0
+        changed = False
+        for j in range(c):
+            q = idx[j]
+            s = 0
+            r = np.inf
+            for which in range(3):
+                d = abs((X[q, 0] - cen[which, 0]) * nrm[which, 0]
+                        + (X[q, 1] - cen[which, 1]) * nrm[which, 1]
+                        + (X[q, 2] - cen[which, 2]) * nrm[which, 2])
+                if d < r:
+                    r = d
+                    s = which
+            if s != side[j]:
+                side[j] = s
+                changed = True
+        if not changed:
+            break
+    max_rms = CORNER_RMS * spacing
+    min_spread = MIN_SPREAD * spacing
+    for which in range(3):
+        if (_plane_fit(X, idx, c, side, which, cen[which], nrm[which], work) < MIN_SIDE
+                or work[0] > max_rms or work[1] < min_spread):
+            return np.inf, 0.0
+    for i in range(3):  # a corner: no two of the faces near parallel (a thin wall's are)
+        for k in range(i + 1, 3):
+            if abs(_dot(nrm, i, nrm, k)) > max_cos:
+                return np.inf, 0.0
+    best_d = np.inf
+    best_fold = 0.0
+    for i in range(3):
+        for k in range(i + 1, 3):
+            cs = _dot(nrm, i, nrm, k)
+            _edge_line(cen[i], nrm[i], cen[k], nrm[k], tmp)
+            # each face has a point within a spacing of the line, and lies on one side of it
+            signs = 1.0
+            meets = True
+            for which in (i, k):
+                nx, ny, nz = nrm[which, 0], nrm[which, 1], nrm[which, 2]
+                tx, ty = tmp[4] * nz - tmp[5] * ny, tmp[5] * nx - tmp[3] * nz
+                tz = tmp[3] * ny - tmp[4] * nx
+                tn = np.sqrt(tx * tx + ty * ty + tz * tz)
+                gap = np.inf
+                total = 0.0
+                for j in range(c):
+                    if side[j] != which:
+                        continue
+                    q = idx[j]
+                    gap = min(gap, _line_distance(X, q, tmp))
+                    total += ((X[q, 0] - tmp[0]) * tx + (X[q, 1] - tmp[1]) * ty
+                              + (X[q, 2] - tmp[2]) * tz) / tn
+                if gap > spacing:
+                    meets = False
+                if total < 0.0:
+                    signs = -signs
+            if not meets:
+                continue
+            fold = np.rad2deg(np.arccos(min(abs(cs), 1.0)))
+            if signs * cs > 0.0:
+                fold = 180.0 - fold
+            d = _line_distance(X, p, tmp)
+            if d < best_d:
+                best_d = d
+                best_fold = fold
+                for e in range(6):
+                    line[e] = tmp[e]
+    return best_d, best_fold
+
+
 @jit
 def nearest_distances(X, start, cnt, pool, out):
     """Distance from every point to its nearest Voronoi neighbour (its nearest neighbour)."""
@@ -507,18 +650,26 @@ def nearest_distances(X, start, cnt, pool, out):
 
 
 @jit
-def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min_angle):
+def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min_angle, width,
+             corner):
     """Step 2 for every candidate: ``out[p]`` = edge distance / local spacing (inf: no edge),
     ``angle[p]`` = the fold of the fitted faces (degrees, 0-180, see ``MIN_ANGLE``; 0 where no
     edge),
     ``line[p]`` = the fitted edge line where there is one (:func:`_edge_line`; undefined
-    elsewhere), ``local[p]`` = the local spacing (0 for points that are not candidates).
+    elsewhere), ``local[p]`` = the local spacing (0 for points that are not candidates),
+    ``corner[p]``: whether that line is a corner's (:func:`_fit_corner`).
     ``min_angle``: the least fold of a sharp edge, in degrees (``MIN_ANGLE`` by default, the
     option ``edge_angle``; at most 90: the test is on the planes' angle, so wedges whose faces
     meet at less than it are not found either).
 
     Local spacing: the median over ``p`` and its two-ring of ``nn`` (each point's distance to
     its nearest neighbour, :func:`nearest_distances`).
+
+    Beyond the paper, a second pass: a candidate whose two-plane fit finds no edge within
+    ``width`` local spacings of it (none, or a farther one) is fitted with three planes
+    (:func:`_fit_corner`); a nearer line found so replaces its own only where its two-ring
+    holds a point that its own two-plane fit flags (within ``width``): a corner ends edges that
+    fit, and a curved patch three planes fit (a small hole or boss, a fillet) has none.
     """
     n = X.shape[0]
     max_cos = np.cos(np.deg2rad(min_angle))
@@ -536,6 +687,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         out[p] = np.inf
         angle[p] = 0.0
         local[p] = 0.0
+        corner[p] = False
         if not candidate[p]:
             continue
         idx[0] = p
@@ -549,10 +701,38 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
                                     line[p], max_cos)
         out[p] = d / s
+    # the corners: after every two-plane fit, which they need beside them
+    mark[:] = 0
+    cen = np.empty((3, 3))
+    nrm = np.empty((3, 3))
+    tmp = np.empty(6)
+    found = np.empty(6)
+    outer = np.empty(MAX_RING + 1, dtype=np.int64)
+    for p in range(n):
+        s = local[p]
+        if not (s > 0.0 and out[p] > width):
+            continue
+        idx[0] = p
+        c = 1 + gather_rings(p, dn, dn_cnt, FIT_RINGS, mark, idx[1:])
+        beside = False
+        for j in range(1, c):
+            q = idx[j]
+            if out[q] <= width and not corner[q]:
+                beside = True
+                break
+        if not beside:
+            continue
+        d, a = _fit_corner(X, normals, idx, c, side, cen, nrm, work, s, found, tmp, max_cos,
+                           proj, outer)
+        if d / s < out[p]:
+            out[p] = d / s
+            angle[p] = a
+            line[p, :] = found
+            corner[p] = True
 
 
 @jit
-def line_distances(X, dn, dn_cnt, fitted, angle, line, local, width, spacing, out):
+def line_distances(X, dn, dn_cnt, fitted, angle, line, local, width, spacing, corner, out):
     """Step 4: ``out[p]`` lowered (in place) to ``p``'s distance to the fitted line of any point
     ``q`` whose two-ring holds it, where ``q`` lies within ``width`` of its own line on an edge
     of ``SOFT_ANGLE`` or more (the lenders of :func:`borrow`), in units of ``max(local[q],
@@ -575,7 +755,7 @@ def line_distances(X, dn, dn_cnt, fitted, angle, line, local, width, spacing, ou
     mark = np.zeros(n, dtype=np.int64)
     ring = np.empty(MAX_RING, dtype=np.int64)
     for q in range(n):
-        if not (fitted[q] <= width and angle[q] >= SOFT_ANGLE):
+        if not (fitted[q] <= width and angle[q] >= SOFT_ANGLE) or corner[q]:
             continue
         c = gather_rings(q, dn, dn_cnt, FIT_RINGS, mark, ring)
         unit = max(local[q], spacing)
@@ -585,7 +765,8 @@ def line_distances(X, dn, dn_cnt, fitted, angle, line, local, width, spacing, ou
 
 
 @jit
-def borrow(X, dn, dn_cnt, distance, angle, line, local, width, flagged, out, angle_out):
+def borrow(X, dn, dn_cnt, distance, angle, line, local, width, flagged, corner, out,
+           angle_out):
     """Step 3: candidates that their own fit does not flag take the edge of a flagged sharp
     neighbour.
 
@@ -635,7 +816,7 @@ def borrow(X, dn, dn_cnt, distance, angle, line, local, width, flagged, out, ang
         c = gather_rings(p, dn, dn_cnt, FIT_RINGS, mark, ring)
         for j in range(c):
             q = ring[j]
-            if not (distance[q] <= width and angle[q] >= SOFT_ANGLE):
+            if not (distance[q] <= width and angle[q] >= SOFT_ANGLE) or corner[q]:
                 continue
             d = _line_distance(X, p, line[q]) / local[p]
             if d < out[p] and d <= BORROW_WIDTH * width:

@@ -210,18 +210,24 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     nn = np.empty(m)
     edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
     fitted, fitted_angle, line, local = np.empty(m), np.empty(m), np.empty((m, 6)), np.empty(m)
+    corner = np.empty(m, dtype=bool)
+    width = options.edge_width
     edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, fitted,
-                      fitted_angle, line, local, float(options.edge_angle))
+                      fitted_angle, line, local, float(options.edge_angle), width, corner)
     distance = np.empty(m) if distance_out is None else distance_out
     angle = np.empty(m)
-    width = options.edge_width
-    edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width,
-                    edge_fit.band(fitted, fitted_angle, width), distance, angle)
-    band = edge_fit.band(distance, angle, width)
+    own = edge_fit.band(fitted, fitted_angle, width)
+    edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width, own, corner,
+                    distance, angle)
+    # points their own corner fit flags are flags, not the core band: the band is sure of
+    # being kept and never swapped out, and a corner's line ends at the corner
+    at_corner = own & corner
+    band = edge_fit.band(distance, angle, width) & ~at_corner
     near = np.full(m, np.inf)
     edge_fit.line_distances(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width,
-                            float(median_spacing(Xu) if spacing is None else spacing), near)
-    return deviation, band, band | (near <= width), threshold
+                            float(median_spacing(Xu) if spacing is None else spacing), corner,
+                            near)
+    return deviation, band, band | at_corner | (near <= width), threshold
 
 
 def _options(options):
