@@ -600,7 +600,8 @@ def _fit_corner(X, normals, idx, c, side, cen, nrm, work, spacing, line, tmp, ma
         for k in range(i + 1, 3):
             cs = _dot(nrm, i, nrm, k)
             _edge_line(cen[i], nrm[i], cen[k], nrm[k], tmp)
-            # each face has a point within a spacing of the line, and lies on one side of it
+            # each face has a point within a spacing of the line; the sign of its points' mean
+            # offset from the line gives its half-plane (the fold, as in _fit_edge)
             signs = 1.0
             meets = True
             for which in (i, k):
@@ -735,7 +736,8 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
 def line_distances(X, dn, dn_cnt, fitted, angle, line, local, width, spacing, corner, out):
     """Step 4: ``out[p]`` lowered (in place) to ``p``'s distance to the fitted line of any point
     ``q`` whose two-ring holds it, where ``q`` lies within ``width`` of its own line on an edge
-    of ``SOFT_ANGLE`` or more (the lenders of :func:`borrow`), in units of ``max(local[q],
+    of ``SOFT_ANGLE`` or more and that line is not a corner's (``corner[q]``: it ends at the
+    corner) — the lenders of :func:`borrow` — in units of ``max(local[q],
     spacing)``: the larger of ``q``'s local spacing and the cloud's.
 
     Beyond the paper. The core band (:func:`band` of steps 2-3) misses the points a little off
@@ -775,8 +777,9 @@ def borrow(X, dn, dn_cnt, distance, angle, line, local, width, flagged, corner, 
     ``distance``, ``angle`` and ``width`` — no fit, or a fitted line farther than the band),
     the distance in its local spacings to the nearest fitted line (``line``) among the points
     of its two-ring that lie within ``width`` of their own line on an edge of ``SOFT_ANGLE``
-    or more, and that line's angle — if within ``BORROW_WIDTH * width`` and nearer than its
-    own line; every other point keeps ``distance`` and ``angle``.
+    or more, not a corner's (``corner``, :func:`_fit_corner`: its line ends at the corner),
+    and that line's angle — if within ``BORROW_WIDTH * width`` and nearer than its own line;
+    every other point keeps ``distance`` and ``angle``.
 
     Beyond the paper. Right on a scanned edge a two-ring can split into two planes badly (three
     to five one-ring neighbours on anisotropic scan lines, a seed across the noise) while the
