@@ -90,6 +90,36 @@ def test_brio_order_is_a_permutation_in_rounds_of_doubling_size():
     assert set(order[2500:].tolist()) == set(perm[2500:].tolist())
 
 
+def _naive_brio(P, seed=0):
+    """The order by its definition: Morton codes interleaved bit by bit, each round of the
+    random permutation sorted by them (ties in permutation order)."""
+    n = len(P)
+    perm = np.random.default_rng(seed).permutation(n)
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    q = np.minimum(((P - lo) / max(float((hi - lo).max()), 1e-300) * 1023.0).astype(np.int64),
+                   1023)
+    code = [sum(((int(q[i, d]) >> b) & 1) << (3 * b + d) for b in range(10) for d in range(3))
+            for i in range(n)]
+    sizes = [n]
+    while sizes[-1] > 1000:
+        sizes.append(sizes[-1] // 2)
+    cuts = [0, *sizes[::-1]]
+    out = []
+    for r0, r1 in zip(cuts[:-1], cuts[1:]):
+        out += sorted(perm[r0:r1].tolist(), key=lambda i: code[i])  # stable: perm order
+    return np.array(out)
+
+
+@pytest.mark.parametrize("cloud", ["random", "plane", "grid", "same"])
+def test_brio_order_equals_its_definition(cloud):
+    rng = np.random.default_rng(7)
+    P = {"random": rng.normal(size=(3000, 3)) * [1e3, 1.0, 1e-3],
+         "plane": np.c_[rng.random((2500, 2)), np.zeros(2500)],
+         "grid": np.stack(np.meshgrid(*[np.arange(14.0)] * 3), -1).reshape(-1, 3),
+         "same": np.ones((1200, 3))}[cloud]
+    np.testing.assert_array_equal(delaunay.brio_order(P), _naive_brio(P))
+
+
 def _check_valid(X, T, max_radius=1e3, flat=False):
     """Positive tetrahedra, no face shared by more than two, no point inside a circumsphere.
     ``flat``: exact ties (unjittered grid points) may leave tetrahedra of zero volume."""

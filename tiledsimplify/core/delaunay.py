@@ -101,6 +101,20 @@ def _insphere(X, a, b, c, d, e):
     return -((ld * abc - lc * dab) + (lb * cda - la * bcd))
 
 
+def _spread_bits():
+    """``table[v]``: the 10 bits of ``v`` spread three apart (bit ``i`` to bit ``3 i``)."""
+    v = np.arange(1024, dtype=np.int64)
+    table = np.zeros(1024, dtype=np.int64)
+    for bit in range(10):
+        table |= ((v >> bit) & 1) << (3 * bit)
+    return table
+
+
+#: a Morton code's three interleaved 10-bit coordinates by table, not bit by bit: 3 gathers
+#: instead of 30 passes over the points (140k points: 3.0 ms against 9.9, the same codes)
+_SPREAD = _spread_bits()
+
+
 def brio_order(P, seed=0):
     """Insertion order: rounds of doubling size drawn at random, each sorted along a Morton
     curve (biased randomised insertion order, Amenta, Choi & Rote 2003)."""
@@ -110,10 +124,7 @@ def brio_order(P, seed=0):
     lo, hi = box(P)
     ext = max(float((hi - lo).max()), 1e-300)
     q = np.minimum(((P - lo) / ext * 1023.0).astype(np.int64), 1023)
-    code = np.zeros(n, dtype=np.int64)
-    for bit in range(10):
-        for d in range(3):
-            code |= ((q[:, d] >> bit) & 1) << (3 * bit + d)
+    code = _SPREAD[q[:, 0]] | (_SPREAD[q[:, 1]] << 1) | (_SPREAD[q[:, 2]] << 2)
     bounds = [n]
     while bounds[-1] > 1000:
         bounds.append(bounds[-1] // 2)
