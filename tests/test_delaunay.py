@@ -1,5 +1,7 @@
 """The compiled Delaunay triangulation against its definition and against Qhull."""
 
+import itertools
+
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull, cKDTree
@@ -105,7 +107,7 @@ def _naive_brio(P, seed=0):
         sizes.append(sizes[-1] // 2)
     cuts = [0, *sizes[::-1]]
     out = []
-    for r0, r1 in zip(cuts[:-1], cuts[1:]):
+    for r0, r1 in itertools.pairwise(cuts):
         out += sorted(perm[r0:r1].tolist(), key=lambda i: code[i])  # stable: perm order
     return np.array(out)
 
