@@ -23,8 +23,10 @@ class SimplifyResult:
         ``band`` alone where the band does not fit. The others compete with the rest.
     band : bool (n,)
         The flagged points nearest each edge line (mode ``"coverage"``: within
-        ``options.edge_width`` local spacings of a fitted or borrowed line, 0.7 of that beside
-        a soft edge; mode ``"paper"``: every flagged point): sampled first for the sure
+        ``options.edge_width`` local spacings of a fitted or borrowed two-plane line, 0.7 of
+        that beside a soft edge — not the points a corner's three-plane fit flags,
+        :func:`tiledsimplify.core.edge_fit._fit_corner`; mode ``"paper"``: every flagged
+        point): sampled first for the sure
         points, and never swapped out by the gap refinement once kept (the other flagged
         points may be, sure or not, but each stays within the refinement's edge cover radius
         of a kept point, :func:`tiledsimplify.core.refine.edge_cover_radius`;
