@@ -477,7 +477,7 @@ def test_corner_fit_finds_the_nearest_edge_of_three_faces():
     assert fold == pytest.approx(90.0, abs=1e-6)
     np.testing.assert_allclose(np.abs(line[3:]), [0.0, 1.0, 0.0], atol=1e-9)
     assert np.linalg.norm(np.cross(line[:3], line[3:])) < 1e-9  # through the origin
-    # the same faces at 30 degrees apart fold too little; a row of points is no face
+    # with a least fold of 95 degrees the faces' 90 fold too little; a row of points is no face
     assert _fit_corner(X, normals, idx, h, min_angle=95.0)[0] == np.inf
     row = [((0, 0, 1), lambda x: x[0] <= 0 and x[1] <= 0),
            ((1, 0, 0), lambda x: x[1] <= 0 and x[2] < 0),
