@@ -212,3 +212,20 @@ def test_the_block_order_is_lexsorts():
             tie = rng.integers(0, top, n, dtype=np.uint64)
             np.testing.assert_array_equal(_block_order(tie),
                                           np.lexsort((tie, np.arange(n) // BLOCK)))
+
+
+def test_given_normals_replace_only_the_normals():
+    """The pre-thinned subset's neighbourhoods take the whole cloud's normals instead of
+    computing their own: every other list the same as without."""
+    rng = np.random.default_rng(4)
+    X = rng.random((1500, 3)) * [1.0, 1.0, 0.01]
+    X -= X.mean(0)
+    given = rng.normal(size=(1500, 3))
+    a = neighbourhoods(X, scale_of(X))
+    b = neighbourhoods(X, scale_of(X), normals=given)
+    np.testing.assert_array_equal(b.normals, given)
+    np.testing.assert_array_equal(b.initial_normals, given)
+    assert b.normals is not given and b.initial_normals is not b.normals
+    for name in ("start", "cnt", "pool", "dn", "dn_cnt", "plane_normals", "stable"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert not np.array_equal(a.normals, given)
