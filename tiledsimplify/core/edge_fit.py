@@ -210,14 +210,25 @@ def _plane_fit(X, idx, c, side, which, centre, normal, work):
 
 
 @jit_leaf
+def _plane_distance(X, q, c, n):
+    """Distance from ``X[q]`` to the plane through ``c`` with unit normal ``n``."""
+    return abs((X[q, 0] - c[0]) * n[0] + (X[q, 1] - c[1]) * n[1] + (X[q, 2] - c[2]) * n[2])
+
+
+@jit_leaf
+def _dot(a, i, b, j):
+    """``a[i] . b[j]`` of two (n, 3) arrays."""
+    return a[i, 0] * b[j, 0] + a[i, 1] * b[j, 1] + a[i, 2] * b[j, 2]
+
+
+@jit_leaf
 def _least_parallel(normals, idx, c, ref):
     """The point of ``idx[:c]`` whose normal is least parallel to ``ref``'s (ties: first)."""
     arg = ref
     best = 2.0
     for j in range(c):
         q = idx[j]
-        d = abs(normals[ref, 0] * normals[q, 0] + normals[ref, 1] * normals[q, 1]
-                + normals[ref, 2] * normals[q, 2])
+        d = abs(_dot(normals, ref, normals, q))
         if d < best:
             best = d
             arg = q
@@ -232,11 +243,7 @@ def _seed_by_normals(normals, idx, c, side):
     b = _least_parallel(normals, idx, c, a)
     for j in range(c):
         q = idx[j]
-        da = abs(normals[a, 0] * normals[q, 0] + normals[a, 1] * normals[q, 1]
-                 + normals[a, 2] * normals[q, 2])
-        db = abs(normals[b, 0] * normals[q, 0] + normals[b, 1] * normals[q, 1]
-                 + normals[b, 2] * normals[q, 2])
-        side[j] = 0 if da >= db else 1
+        side[j] = 0 if abs(_dot(normals, a, normals, q)) >= abs(_dot(normals, b, normals, q)) else 1
 
 
 @jit_inline
@@ -441,11 +448,7 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
         changed = False
         for j in range(c):
             q = idx[j]
-            r1 = abs((X[q, 0] - c1[0]) * n1[0] + (X[q, 1] - c1[1]) * n1[1]
-                     + (X[q, 2] - c1[2]) * n1[2])
-            r2 = abs((X[q, 0] - c2[0]) * n2[0] + (X[q, 1] - c2[1]) * n2[1]
-                     + (X[q, 2] - c2[2]) * n2[2])
-            s = 0 if r1 <= r2 else 1
+            s = 0 if _plane_distance(X, q, c1, n1) <= _plane_distance(X, q, c2, n2) else 1
             if s != side[j]:
                 side[j] = s
                 changed = True
@@ -506,9 +509,6 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
 CORNER_RMS = 0.3
 
 
-@jit_leaf
-def _dot(a, i, b, j):
-    return a[i, 0] * b[j, 0] + a[i, 1] * b[j, 1] + a[i, 2] * b[j, 2]
 
 
 @jit
@@ -573,9 +573,7 @@ def _fit_corner(X, normals, idx, c, side, cen, nrm, work, spacing, line, tmp, ma
             s = 0
             r = np.inf
             for which in range(3):
-                d = abs((X[q, 0] - cen[which, 0]) * nrm[which, 0]
-                        + (X[q, 1] - cen[which, 1]) * nrm[which, 1]
-                        + (X[q, 2] - cen[which, 2]) * nrm[which, 2])
+                d = _plane_distance(X, q, cen[which], nrm[which])
                 if d < r:
                     r = d
                     s = which

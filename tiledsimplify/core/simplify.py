@@ -554,8 +554,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         stats["n_prethin_subset"] = int(keep_ids.size)
         st = state = None  # the whole cloud's lists (~0.4 KB a point) before the subset's
         Xg = np.ascontiguousarray(Xu[keep_ids])
-        st = neighbourhoods(Xg, D, reach, normals_u[keep_ids])  # the whole cloud's normals,
-        # as without thinning
+        # with the whole cloud's normals, as without thinning
+        st = neighbourhoods(Xg, D, reach, normals_u[keep_ids])
         boundary_g, tie_g = anchor_u[keep_ids], tie[keep_ids]
         alive = ~never_u[keep_ids]
     else:
