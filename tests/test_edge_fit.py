@@ -27,7 +27,7 @@ def _localise_all(X, min_angle=edge_fit.MIN_ANGLE):
     n = len(X)
     out, angle, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
     edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, np.ones(n, bool), out, angle, line,
-                      local, min_angle, 1.0, np.empty(n, bool))
+                      local, min_angle, 1.0, np.empty(n, bool), np.empty(n, bool))
     return out, nn, angle
 
 
@@ -281,7 +281,7 @@ def _fitted_scan(data_dir, n_points=6000):
 
 def _steps_1_2(X, width=1.0):
     """Steps 1-2 of every candidate of centred ``X``: ``(X, st, cand, dist, ang, line, local,
-    corner, nn)``."""
+    corner, nn, smooth)``."""
     st = neighbourhoods(X, scale_of(X))
     n = len(X)
     dev, smooth, nn = np.empty(n), np.empty((n, 3)), np.empty(n)
@@ -289,10 +289,10 @@ def _steps_1_2(X, width=1.0):
     edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
     cand = dev > edge_fit.CANDIDATE
     dist, ang, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
-    corner = np.empty(n, bool)
+    corner, smooth_fit = np.empty(n, bool), np.empty(n, bool)
     edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, cand, dist, ang, line, local,
-                      edge_fit.MIN_ANGLE, width, corner)
-    return X, st, cand, dist, ang, line, local, corner, nn
+                      edge_fit.MIN_ANGLE, width, corner, smooth_fit)
+    return X, st, cand, dist, ang, line, local, corner, nn, smooth_fit
 
 
 def _two_ring(dn, dn_cnt, p):
@@ -374,8 +374,10 @@ def test_flags_reach_one_spacing_beside_the_band(data_dir, monkeypatch, part, sc
     f1 = metrics.boundary_detection(X, res.boundary, edge_segments=seg, spacing=s)["f1"]
     f1_band = metrics.boundary_detection(X, res.band, edge_segments=seg, spacing=s)["f1"]
     assert f1 >= least and f1_band < band_below, (f1, f1_band)
-    assert (res.boundary >= res.band).all() and res.stats["n_edge_band"] == res.band.sum()
-    assert res.stats["n_edge_sure"] <= min(0.4 * res.target, res.boundary.sum())
+    # the band is the features' (smooth folds too, not flags): every flag or smooth fold
+    assert res.stats["n_edge_band"] == res.band.sum() <= res.stats["n_features"]
+    assert res.boundary.sum() <= res.stats["n_features"]
+    assert res.stats["n_edge_sure"] <= min(0.4 * res.target, res.stats["n_features"])
     small = simplify_points(X, ratio=0.05, options={"refine": False})
     assert small.band.sum() > 0.4 * small.target
     refined = simplify_points(X, ratio=0.05)
@@ -514,9 +516,9 @@ def test_corner_fits_lie_at_edges_beside_two_plane_fits(data_dir):
     a two-ring holds three faces. Corner fits are there, mostly within a spacing of a true
     edge, only where no two-plane fit flags the point itself and one flags a point beside."""
     X0, seg, s = _plate_holes(data_dir)
-    X, st, _, dist, ang, _, _, corner, _ = _steps_1_2(X0 - X0.mean(0))
+    X, st, _, dist, ang, _, _, corner, _, _ = _steps_1_2(X0 - X0.mean(0))
     # the same without corners: localise at a width no fit exceeds tries none
-    _, _, _, dist2, ang2, _, _, none, _ = _steps_1_2(X, np.inf)
+    _, _, _, dist2, ang2, _, _, none, _, _ = _steps_1_2(X, np.inf)
     assert not none.any()
     assert corner.sum() >= 30
     assert (dist[corner] < dist2[corner]).all() and (dist2[corner] > 1.0).all()
@@ -537,3 +539,80 @@ def test_corners_cover_the_edges_of_plate_holes(data_dir):
     X, seg, s = _plate_holes(data_dir)
     res = simplify_points(X, ratio=0.2)
     assert metrics.edge_coverage(X, res.keep, metrics.sample_segments(seg, s), s) >= 0.95
+
+
+def _naive_quadric_sse(P):
+    """The least-squares quadric height field over the PCA plane of ``P``, by numpy."""
+    _, V = np.linalg.eigh(np.cov((P - P.mean(0)).T))
+    Q = P - P[0]
+    u, v, w = Q @ V[:, 1], Q @ V[:, 2], Q @ V[:, 0]
+    A = np.c_[u * u, u * v, v * v, u, v, np.ones(len(P))]
+    coef = np.linalg.lstsq(A, w, rcond=None)[0]
+    return float(((A @ coef - w) ** 2).sum())
+
+
+def _quadric_sse(P, spacing):
+    return edge_fit._quadric_sse(P, np.arange(len(P)), len(P), spacing, *np.empty((4, 3)),
+                                 np.empty((6, 6)), np.empty(6))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_quadric_sse_equals_least_squares(seed):
+    rng = np.random.default_rng(seed)
+    u, v = rng.normal(size=(2, 25))
+    R = np.linalg.qr(rng.normal(size=(3, 3)))[0]  # any frame, far from the origin
+    P = np.c_[u, v, 0.3 * u * u - 0.2 * u * v + 0.1 * v + 0.05 * rng.normal(size=25)] @ R.T
+    P += 1e4
+    assert _quadric_sse(P, 0.7) == pytest.approx(_naive_quadric_sse(P), rel=1e-6)
+    assert _quadric_sse(P[:5], 0.7) == np.inf  # five points fix no quadric
+    # a plane: no residual
+    P[:, :] = np.c_[u, v, 0.0 * u] @ R.T + 1e4
+    assert _quadric_sse(P, 1.0) < 1e-16
+
+
+def _fillet(rng, n, radius):
+    """A face z = 0 (x < 0) turning down by 90° into a face x = radius (z < -radius) over a
+    quarter cylinder of the given radius (a sharp edge at radius 0), points at random, 2 x 2
+    on each face: ``(X, on_arc)``."""
+    arc = np.pi / 2 * radius
+    t = rng.random(n) * (4.0 + arc) - 2.0  # arc length along the profile
+    y = rng.random(n) * 2.0 - 1.0
+    a = np.clip(t / radius if radius else 0.0, 0.0, np.pi / 2)
+    x = np.where(t < 0, t, np.where(t > arc, radius, radius * np.sin(a)))
+    z = np.where(t < 0, 0.0, np.where(t > arc, -radius - (t - arc), radius * (np.cos(a) - 1)))
+    return np.c_[x, y, z], (t >= 0) & (t <= arc)
+
+
+def test_a_fillet_is_a_smooth_fold_and_an_edge_is_not():
+    """A two-plane fit finds a fold on a fillet, but one quadric fits it better: ``localise``
+    marks it smooth. At a sharp edge, noisy or not, two planes fit best. (Random points: the
+    median nearest-neighbour distance is ~0.48 h, so the fillet's radius, 4 h, is ~8 of
+    those; at 1.5 h, ~3, a sixth of the fits on the arc are found smooth, measured.)"""
+    rng = np.random.default_rng(5)
+    n = 6000
+    h = np.sqrt(8.0 / n)  # 2 x 4 of faces: the points' mean spacing, about
+    X, on_arc = _fillet(rng, n, 4.0 * h)
+    X, _, _, dist, _, _, _, _, _, smooth_fit = _steps_1_2(X - X.mean(0))
+    middle = np.abs(X[:, 1]) < 0.8  # off the patch's open ends
+    fits = np.isfinite(dist) & middle & on_arc
+    assert fits.sum() > 30
+    assert smooth_fit[fits].mean() > 0.8
+    for noise in (0.0, 0.1):
+        E, _ = _fillet(rng, n, 0.0)
+        E += noise * h * rng.normal(size=E.shape)
+        E, _, _, dist, _, _, _, _, _, smooth_fit = _steps_1_2(E - E.mean(0))
+        flagged = (dist <= 1.0) & (np.abs(E[:, 1]) < 0.8)
+        assert flagged.sum() > 40
+        assert smooth_fit[flagged].mean() < 0.03
+
+
+def test_fillets_are_kept_like_edges_but_not_flagged(data_dir):
+    """plate_holes at 20 % (the quality benchmark's case): its fillets' points were 453 of the
+    1,025 points their own two-plane fit flagged (precision 0.584 over all flags). Smooth
+    folds are no longer flags, but they are still features: the sure points and the core band
+    take them."""
+    X, seg, s = _plate_holes(data_dir)
+    res = simplify_points(X, ratio=0.2)
+    det = metrics.boundary_detection(X, res.boundary, edge_segments=seg, spacing=s)
+    assert det["precision"] >= 0.7 and det["recall"] >= 0.84
+    assert (res.band & ~res.boundary).sum() > 50

@@ -410,7 +410,8 @@ def test_a_short_run_says_why_as_the_core_does(bunny, tmp_path):
     X, path = bunny
     s = run(path, tmp_path / "b.npy", count=10, tile_points=3000,
             options=SimplifyOptions(edge_share=float("inf")))  # every flagged point kept
-    assert not s.reached and s.n_output == s.n_boundary > 10
+    # (and the smooth folds' points: features, sure as the flags are, not flagged)
+    assert not s.reached and s.n_output >= s.n_boundary > 10
     assert s.message == (f"asked to keep 10 of {len(X)} points, but {s.n_output} must be kept "
                          f"({s.n_output} boundary): kept {s.n_output}. Raise the target, or "
                          "give options.edge_share a share of the count (such as 0.5) to keep "

@@ -175,23 +175,25 @@ def reach_length(Xu, options, spacing=None):
 
 
 def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
-    """Paper step 3: ``(deviation, core band, flags, threshold)`` as the options' mode says.
+    """Paper step 3: ``(deviation, core band, features, flags, threshold)`` as the options'
+    mode says.
 
-    ``flags`` are the points reported on or near a sharp edge; the ``core band`` (a subset)
-    the ones nearest each edge line, sampled first for the points kept for certain (up to
-    ``edge_share``), which the refinement never swaps out. ``distance_out`` (optional, length
-    m): filled in mode ``"coverage"`` with each point's distance to its fitted (or borrowed)
-    edge line in local spacings (``inf``: none), what :func:`.prethin.edge_sample` orders by;
-    ``inf`` everywhere in mode ``"paper"``.
+    ``flags`` are the points reported on or near a sharp edge. ``features`` add the points
+    near a narrow smooth fold (:func:`.edge_fit.localise`: a fillet a few spacings across,
+    which two planes fit but one quadric fits better): at the kept spacing such a fold is an
+    edge too, so the sure points are sampled from the features, but it is not a sharp one, so
+    it is not reported. The ``core band`` (a subset of the features) holds the points nearest
+    each line, sampled first for the points kept for certain (up to ``edge_share``), which the
+    refinement never swaps out. ``distance_out`` (optional, length m): filled in mode
+    ``"coverage"`` with each point's distance to its fitted (or borrowed) line in local
+    spacings (``inf``: none), what :func:`.prethin.edge_sample` orders by; ``inf`` everywhere
+    in mode ``"paper"``.
     ``spacing``: the cloud's point spacing (:func:`.edge_fit.line_distances`; None: measured).
 
-    ``"paper"``: the one-ring measure with the automatic threshold (§3.1); band and flags are
-    the same. ``"coverage"``: the two-ring measure, candidates above the threshold, then the
-    core band: those within ``options.edge_width`` local spacings of a fitted edge line — their
-    own or, where that does not flag them (no fit, or a farther edge), a flagged neighbour's
-    (:func:`.edge_fit.borrow`) — less beside a soft edge (:func:`.edge_fit.band`); the flags
-    add every point within ``options.edge_width`` spacings of a sharp fitted line near it
-    (:func:`.edge_fit.line_distances`).
+    ``"paper"``: the one-ring measure with the automatic threshold (§3.1); band, features and
+    flags are the same. ``"coverage"``: the two-ring measure, candidates above the threshold,
+    then :func:`_flags_of_fits` on their fitted lines — once with every line for the band and
+    the features, once without the smooth folds' for the flags.
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
@@ -201,25 +203,48 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     if options.mode == "paper":
         boundary_mod.all_deviations(Xu, st.normals, st.dn, st.dn_cnt, deviation)
         if not options.detect_boundary:
-            return deviation, none, none, float("inf")
+            return deviation, none, none, none, float("inf")
         flags, threshold = boundary_mod.detect(
             deviation, threshold=options.boundary_threshold, k=options.boundary_k,
             floor=options.boundary_floor)
-        return deviation, flags, flags, threshold
-    smooth = np.zeros((m, 3))
-    edge_fit.smoothed_deviations(Xu, st.dn, st.dn_cnt, smooth, deviation)
+        return deviation, flags, flags, flags, threshold
+    smooth_normals = np.zeros((m, 3))
+    edge_fit.smoothed_deviations(Xu, st.dn, st.dn_cnt, smooth_normals, deviation)
     if not options.detect_boundary:
-        return deviation, none, none, float("inf")
+        return deviation, none, none, none, float("inf")
     threshold = (edge_fit.CANDIDATE if options.boundary_threshold is None
                  else float(options.boundary_threshold))
     nn = np.empty(m)
     edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
     fitted, fitted_angle, line, local = np.empty(m), np.empty(m), np.empty((m, 6)), np.empty(m)
     corner = np.empty(m, dtype=bool)
-    width = options.edge_width
+    smooth = np.empty(m, dtype=bool)
+    width = float(options.edge_width)
     edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, fitted,
-                      fitted_angle, line, local, float(options.edge_angle), width, corner)
+                      fitted_angle, line, local, float(options.edge_angle), width, corner,
+                      smooth)
+    spacing = float(median_spacing(Xu) if spacing is None else spacing)
     distance = np.empty(m) if distance_out is None else distance_out
+    band, features = _flags_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing,
+                                    corner, distance)
+    flags = features
+    if smooth.any():
+        _, flags = _flags_of_fits(Xu, st, np.where(smooth, np.inf, fitted), fitted_angle, line,
+                                  local, width, spacing, corner, np.empty(m))
+    return deviation, band, features, flags, threshold
+
+
+def _flags_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing, corner, distance):
+    """``(core band, flags)`` of the fitted lines (:func:`.edge_fit.localise`'s outputs).
+
+    The core band: the candidates within ``width`` local spacings of a fitted line — their own
+    or, where that does not flag them (no fit, or a farther line), a flagged neighbour's
+    (:func:`.edge_fit.borrow`; each point's distance to it into ``distance``) — less beside a
+    soft edge (:func:`.edge_fit.band`). The flags add the points their own corner fit flags
+    and every point within ``width`` spacings of a sharp fitted line near it
+    (:func:`.edge_fit.line_distances`).
+    """
+    m = Xu.shape[0]
     angle = np.empty(m)
     own = edge_fit.band(fitted, fitted_angle, width)
     edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width, own, corner,
@@ -230,9 +255,8 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     band = edge_fit.band(distance, angle, width) & ~at_corner
     near = np.full(m, np.inf)
     edge_fit.line_distances(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width,
-                            float(median_spacing(Xu) if spacing is None else spacing), corner,
-                            near)
-    return deviation, band, band | at_corner | (near <= width), threshold
+                            spacing, corner, near)
+    return band, band | at_corner | (near <= width)
 
 
 def _options(options):
@@ -481,10 +505,11 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
                           float((st.cnt == 0).mean()) if m else 0.0)
     lap("neighbours_normals")
     edge_distance = np.empty(m)
-    # ``flags_u``: every point on or near an edge; ``band_u`` the ones nearest the edge lines,
-    # sampled first for the sure points and never swapped out by the refinement
-    deviation_u, band_u, flags_u, threshold = boundary_flags(Xu, st, options, edge_distance,
-                                                             spacing)
+    # ``flags_u``: every point on or near a sharp edge; ``features_u`` those and the points
+    # near a narrow smooth fold; ``band_u`` the features nearest their lines, sampled first for
+    # the sure points and never swapped out by the refinement
+    deviation_u, band_u, features_u, flags_u, threshold = boundary_flags(
+        Xu, st, options, edge_distance, spacing)
     lap("boundary")
     code = MEASURES[options.importance]
     weight = 0.0
@@ -493,21 +518,22 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         stats["spacing"] = float(spacing)
 
     tie = coordinate_hash(X[rep])
-    # beyond the paper: the flagged points sure of being kept, at most ``edge_share`` of the
+    # beyond the paper: the feature points sure of being kept, at most ``edge_share`` of the
     # count (of the tile's share of the global one in a tiled run, as every pass over it
     # asks): all of them if they fit; else an even sample of them, the band's points nearest
-    # their line first — of the band alone where the band does not fit. The other flagged
-    # points stay flagged but compete with the rest
-    anchor_u = flags_u
+    # their line first — of the band alone where the band does not fit. The other feature
+    # points (flagged or not) compete with the rest
+    anchor_u = features_u
     share = options.edge_share_value
-    if math.isfinite(share) and not by_guard and flags_u.any():
+    if math.isfinite(share) and not by_guard and features_u.any():
         goal = math.floor(share * (target if prethin_target is None else prethin_target))
         if spacing is None:  # mode "paper" (not measured yet): once, for the pre-thinning too
             spacing = median_spacing(Xu)
         anchor_u = prethin_mod.edge_sample(Xu, st.start, st.cnt, st.pool,
-                                           band_u if band_u.sum() > goal else flags_u,
+                                           band_u if band_u.sum() > goal else features_u,
                                            edge_distance, tie, goal, spacing)
     stats["n_edge_sure"] = int(anchor_u.sum())
+    stats["n_features"] = int(features_u[inverse].sum())
 
     # 5. progressive removal: duplicate copies first (importance 0), then the greedy sequence
     boundary = flags_u[inverse]

@@ -1169,9 +1169,12 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     if by_guard:
         target = n - n_removed  # what the limit allows is the count asked for
     reached = n - n_removed == target
-    # short: every tile ran to its end, so what is left is boundary points and vetoed ones
-    message = "" if reached else short_message(target, n, n_out, n_out, n_boundary,
-                                               n_out - n_boundary, options.guard)
+    # short: every tile ran to its end, so what is left is boundary points and vetoed ones —
+    # with no guard none vetoed: the sure points beyond the flags are smooth folds' (features,
+    # :func:`..core.simplify.boundary_flags`), counted with them
+    vetoed = n_out - n_boundary if options.guard != "none" else 0
+    message = "" if reached else short_message(target, n, n_out, n_out, n_out - vetoed,
+                                               vetoed, options.guard)
     if message:
         log.warning("%s", message)
     summary = RunSummary(n_input=n, n_output=n_out, target=target, n_boundary=n_boundary,
