@@ -27,7 +27,7 @@ def _localise_all(X, min_angle=edge_fit.MIN_ANGLE):
     n = len(X)
     out, angle, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
     edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, np.ones(n, bool), out, angle, line,
-                      local, min_angle, 1.0, np.empty(n, bool), np.empty(n, bool))
+                      local, min_angle, 1.0, np.empty(n, bool), np.empty(n))
     return out, nn, angle
 
 
@@ -244,14 +244,16 @@ def test_boundary_found_on_a_noisy_line_scan(data_dir, noise):
     fit badly; the sweep seed recovers the edge (before it: F1 0.60 / 0.58, with it 0.67 /
     0.66), points whose fit still fails borrow a neighbour's edge (0.73 / 0.71), and the flags
     reach one spacing from a sharp line, not only its core band (0.746 / 0.759; the band
-    nearest the line 0.737 / 0.735 at precision 0.77)."""
+    nearest the line 0.737 / 0.735 at precision 0.77). Creases lending flags as sharp edges
+    do (``edge_fit.SHARP_RATIO``) cost precision here: 0.719 / 0.744 at precision 0.644 /
+    0.664."""
     V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
     s = synthetic.spacing(synthetic.scan(V, F, n_points=12000, seed=0)[0])
     X, _ = synthetic.scan(V, F, n_points=12000, noise=noise * s, seed=0)
     seg = V[synthetic.sharp_edges(V, F)]
     res = simplify_points(X, ratio=0.2, options=SimplifyOptions(progressive=False))
     bd = metrics.boundary_detection(X, res.boundary, edge_segments=seg, spacing=s)
-    assert bd["f1"] >= 0.73 and bd["precision"] >= 0.68, bd
+    assert bd["f1"] >= 0.71 and bd["precision"] >= 0.63, bd
     core = metrics.boundary_detection(X, res.band, edge_segments=seg, spacing=s)
     assert core["f1"] >= 0.72 and core["precision"] >= 0.75, core
 
@@ -281,7 +283,7 @@ def _fitted_scan(data_dir, n_points=6000):
 
 def _steps_1_2(X, width=1.0):
     """Steps 1-2 of every candidate of centred ``X``: ``(X, st, cand, dist, ang, line, local,
-    corner, nn, smooth)``."""
+    corner, nn, bend)``."""
     st = neighbourhoods(X, scale_of(X))
     n = len(X)
     dev, smooth, nn = np.empty(n), np.empty((n, 3)), np.empty(n)
@@ -289,10 +291,10 @@ def _steps_1_2(X, width=1.0):
     edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
     cand = dev > edge_fit.CANDIDATE
     dist, ang, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
-    corner, smooth_fit = np.empty(n, bool), np.empty(n, bool)
+    corner, bend = np.empty(n, bool), np.empty(n)
     edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, cand, dist, ang, line, local,
-                      edge_fit.MIN_ANGLE, width, corner, smooth_fit)
-    return X, st, cand, dist, ang, line, local, corner, nn, smooth_fit
+                      edge_fit.MIN_ANGLE, width, corner, bend)
+    return X, st, cand, dist, ang, line, local, corner, nn, bend
 
 
 def _two_ring(dn, dn_cnt, p):
@@ -376,7 +378,6 @@ def test_flags_reach_one_spacing_beside_the_band(data_dir, monkeypatch, part, sc
     assert f1 >= least and f1_band < band_below, (f1, f1_band)
     # the band is the features' (smooth folds too, not flags): every flag or smooth fold
     assert res.stats["n_edge_band"] == res.band.sum() <= res.stats["n_features"]
-    assert res.boundary.sum() <= res.stats["n_features"]
     assert res.stats["n_edge_sure"] <= min(0.4 * res.target, res.stats["n_features"])
     small = simplify_points(X, ratio=0.05, options={"refine": False})
     assert small.band.sum() > 0.4 * small.target
@@ -592,7 +593,9 @@ def test_a_fillet_is_a_smooth_fold_and_an_edge_is_not():
     n = 6000
     h = np.sqrt(8.0 / n)  # 2 x 4 of faces: the points' mean spacing, about
     X, on_arc = _fillet(rng, n, 4.0 * h)
-    X, _, _, dist, _, _, _, _, _, smooth_fit = _steps_1_2(X - X.mean(0))
+    X, _, _, dist, ang, _, _, _, _, bend = _steps_1_2(X - X.mean(0))
+    assert np.isnan(bend[~np.isfinite(dist)]).all() and not np.isnan(bend[np.isfinite(dist)]).any()
+    smooth_fit = edge_fit.fold_kinds(bend, ang)[0]
     middle = np.abs(X[:, 1]) < 0.8  # off the patch's open ends
     fits = np.isfinite(dist) & middle & on_arc
     assert fits.sum() > 30
@@ -600,19 +603,52 @@ def test_a_fillet_is_a_smooth_fold_and_an_edge_is_not():
     for noise in (0.0, 0.1):
         E, _ = _fillet(rng, n, 0.0)
         E += noise * h * rng.normal(size=E.shape)
-        E, _, _, dist, _, _, _, _, _, smooth_fit = _steps_1_2(E - E.mean(0))
+        E, _, _, dist, ang, _, _, _, _, bend = _steps_1_2(E - E.mean(0))
         flagged = (dist <= 1.0) & (np.abs(E[:, 1]) < 0.8)
         assert flagged.sum() > 40
+        smooth_fit, crease = edge_fit.fold_kinds(bend, ang)
         assert smooth_fit[flagged].mean() < 0.03
+        assert not crease.any()  # a 90° fold is sharp, not soft
 
 
-def test_fillets_are_kept_like_edges_but_not_flagged(data_dir):
+def test_fillets_are_kept_like_edges_but_not_flagged(data_dir, monkeypatch):
     """plate_holes at 20 % (the quality benchmark's case): its fillets' points were 453 of the
     1,025 points their own two-plane fit flagged (precision 0.584 over all flags). Smooth
-    folds are no longer flags, but they are still features: the sure points and the core band
-    take them."""
+    folds are no longer flags, but they are still features: the sure points, the core band
+    and the refinement's edge cover take them, so the flags change no kept point."""
     X, seg, s = _plate_holes(data_dir)
     res = simplify_points(X, ratio=0.2)
     det = metrics.boundary_detection(X, res.boundary, edge_segments=seg, spacing=s)
-    assert det["precision"] >= 0.7 and det["recall"] >= 0.84
-    assert (res.band & ~res.boundary).sum() > 50
+    assert det["precision"] >= 0.65 and det["recall"] >= 0.84  # 0.686 / 0.870 measured
+    assert (res.band & ~res.boundary).sum() > 50 and (res.features >= res.band).all()
+    # every fold taken as a sharp edge's (no smooth folds, no creases): the flags are the
+    # features, and every kept point is the same
+    monkeypatch.setattr(edge_fit, "fold_kinds",
+                        lambda bend, angle: (np.zeros(len(bend), bool),) * 2)
+    plain = simplify_points(X, ratio=0.2)
+    for name in ("keep", "rank", "order", "band", "features"):
+        np.testing.assert_array_equal(getattr(plain, name), getattr(res, name))
+    np.testing.assert_array_equal(plain.boundary, plain.features)
+    assert metrics.boundary_detection(X, plain.boundary, edge_segments=seg,
+                                      spacing=s)["precision"] < 0.6
+
+
+def test_creases_flag_as_far_as_sharp_edges(data_dir, monkeypatch):
+    """idler_riser (20k points, 20 %): its edges fold by 45-60°, soft, whose band is narrower
+    and whose lines lend no flags — but where two planes fit the two-ring four times better
+    than one quadric, the fold is a crease and lends them as a sharp edge does: recall
+    0.79 -> 0.91, F1 0.868 -> 0.935."""
+    V, F = read_mesh(data_dir / "meshes" / "trimesh_cad" / "idler_riser.STL")
+    X, _ = synthetic.sample_surface_even(V, F, 20_000, seed=0, tol=0.001)
+    seg, s = V[synthetic.sharp_edges(V, F)], synthetic.spacing(X)
+    res = simplify_points(X, ratio=0.2)
+    f1 = metrics.boundary_detection(X, res.boundary, edge_segments=seg, spacing=s)["f1"]
+    kinds = edge_fit.fold_kinds
+    monkeypatch.setattr(edge_fit, "fold_kinds",
+                        lambda bend, angle: (kinds(bend, angle)[0], np.zeros(len(bend), bool)))
+    no_crease = simplify_points(X, ratio=0.2)
+    f1_before = metrics.boundary_detection(X, no_crease.boundary, edge_segments=seg,
+                                           spacing=s)["f1"]
+    assert f1 >= 0.92 and f1_before < 0.88, (f1, f1_before)
+    assert (res.boundary >= no_crease.boundary).all()
+    np.testing.assert_array_equal(res.keep, no_crease.keep)

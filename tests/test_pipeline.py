@@ -889,8 +889,9 @@ def test_tiles_do_not_show(case, bunny, data_dir, tmp_path):
         assert cov_t >= 0.95 * cov_u
 
 
-def test_tiles_keep_their_flags_within_the_edge_cover_radius(data_dir, tmp_path):
-    # each tile's refinement covers its flagged core points as the untiled core does
+def test_tiles_keep_their_features_within_the_edge_cover_radius(data_dir, tmp_path):
+    # each tile's refinement covers its feature core points (the flags' edges and smooth
+    # folds: what is kept like an edge) as the untiled core does
     from scipy.spatial import cKDTree
 
     from tiledsimplify import synthetic
@@ -906,7 +907,7 @@ def test_tiles_keep_their_flags_within_the_edge_cover_radius(data_dir, tmp_path)
     assert s.refined and ts.n_tiles >= 8
     flags = np.zeros(len(X), dtype=bool)
     for i in range(ts.n_tiles):
-        flags[ts.core(i)[1]] = ts.read_result(i, "boundary")
+        flags[ts.core(i)[1]] = ts.read_result(i, "feature")
     radius = edge_cover_radius(s.spacing, 0.2)
     near = {name: np.mean(cKDTree(X[keep]).query(X[flags])[0] <= radius)
             for name, keep in (("tiled", refined_mask(ts)),
@@ -1455,8 +1456,8 @@ def test_a_store_for_other_settings_is_refused_naming_what_differs(bunny, tmp_pa
     config = json.loads(json.dumps(made))
     del config["tile_results"]
     root.attrs["config"] = {**config, "fingerprint": "of an older version"}
-    with pytest.raises(InputError, match=r"\(tile_results: step, importance, boundary, fixed, "
-                                         r"normal here, absent in the store\)"):
+    with pytest.raises(InputError, match=r"\(tile_results: step, importance, boundary, "
+                                         r"feature, fixed, normal here, absent in the store\)"):
         run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, store=store, progress=False)
 
 

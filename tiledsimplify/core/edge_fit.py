@@ -41,7 +41,11 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    and the quadric cannot bend that fast. A smooth fold's line still makes **features** — the
    sure points are sampled from them and the core band holds them (at the kept spacing a
    narrow fillet is an edge too: without them plate_holes' mean surface error rose 3.68 ->
-   4.43) — but not **flags** (:func:`.simplify.boundary_flags`).
+   4.43), and the refinement keeps them covered — but not **flags**
+   (:func:`.simplify.boundary_flags`). The other way, a soft fold (less than ``SOFT_ANGLE``)
+   whose two planes fit at least ``SHARP_RATIO`` times better than the quadric is a
+   **crease**, whose line lends flags (step 4) as a sharp edge's does (:func:`fold_kinds`).
+   So the flags change no kept point: the features decide.
 3. **Borrowed edges** — a candidate that its own fit does not flag (the fit failed, or found
    another, farther edge) is located by the line of a flagged neighbour on a sharp edge
    (:func:`borrow`).
@@ -136,6 +140,16 @@ SWEEP_SIDE = 0.2
 #: well). 0.36: +2.6 % / +0.3 % (plate_holes 0.780, idler_riser 0.874); 1.0: plate_holes
 #: 0.823 but idler_riser 0.832 (recall 0.810 -> 0.732)
 SMOOTH_RATIO = 0.5
+#: a soft fold (less than ``SOFT_ANGLE``) whose two planes fit its two-ring with at most
+#: 1 / this of one quadric height field's squared error is a **crease**: flags reach a full
+#: ``width`` from its line, as from a sharp edge's (:func:`fold_kinds`, the second argument of
+#: :func:`line_distances`' lenders). Soft folds lend no flags otherwise: most used to be
+#: fillets. Measured on the 38 quality cases (flags only; docs/measurements.md "Creases"):
+#: boundary F1 geometric mean +1.2 % (idler_riser 0.868 -> 0.935, its noise-0.1 scan 0.545 ->
+#: 0.639, counter's 0.453 -> 0.534; plate_holes 0.793 -> 0.767); 2: +2.1 % but
+#: octagonal_pocket 0.856 -> 0.848 and plate_holes 0.690; every soft fold (0): +1.5 %,
+#: plate_holes 0.571
+SHARP_RATIO = 4.0
 
 
 @jit_leaf
@@ -719,15 +733,17 @@ def _two_plane_sse(X, idx, c, side, c1, n1, c2, n2, work):
 
 @jit
 def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min_angle, width,
-             corner, smooth):
+             corner, bend):
     """Step 2 for every candidate: ``out[p]`` = edge distance / local spacing (inf: no edge),
     ``angle[p]`` = the fold of the fitted faces (degrees, 0-180, see ``MIN_ANGLE``; 0 where no
     edge),
     ``line[p]`` = the fitted edge line where there is one (:func:`_edge_line`; undefined
     elsewhere), ``local[p]`` = the local spacing (0 for points that are not candidates),
-    ``corner[p]``: whether that line is a corner's (:func:`_fit_corner`), ``smooth[p]``:
-    whether the two-plane fit is a smooth fold (one quadric fits the two-ring with less than
-    ``SMOOTH_RATIO`` of the planes' squared error: :func:`_quadric_sse`, :func:`_two_plane_sse`).
+    ``corner[p]``: whether that line is a corner's (:func:`_fit_corner`), ``bend[p]``: the
+    squared error of one quadric height field over the two-ring over that of the two planes
+    (:func:`_quadric_sse`, :func:`_two_plane_sse`; NaN where no two-plane fit found an edge,
+    ``inf`` where the planes fit exactly and the quadric does not) — below ``SMOOTH_RATIO`` a
+    smooth fold, at or above ``SHARP_RATIO`` a crease (:func:`fold_kinds`).
     ``min_angle``: the least fold of a sharp edge, in degrees (``MIN_ANGLE`` by default, the
     option ``edge_angle``; at most 90: the test is on the planes' angle, so wedges whose faces
     meet at less than it are not found either).
@@ -756,7 +772,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     M6 = np.empty((6, 6))
     r6 = np.empty(6)
     for p in range(n):
-        smooth[p] = False
+        bend[p] = np.nan
         out[p] = np.inf
         angle[p] = 0.0
         local[p] = 0.0
@@ -775,7 +791,8 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
                                     line[p], max_cos)
         if d < np.inf:
             sse2 = _two_plane_sse(X, idx, c, side, c1, n1, c2, n2, work)
-            smooth[p] = _quadric_sse(X, idx, c, s, c1, n1, c2, work, M6, r6) < SMOOTH_RATIO * sse2
+            sq = _quadric_sse(X, idx, c, s, c1, n1, c2, work, M6, r6)
+            bend[p] = sq / sse2 if sse2 > 0.0 else (np.inf if sq > 0.0 else np.nan)
         out[p] = d / s
     # the corners: after every two-plane fit, which they need beside them
     mark[:] = 0
@@ -900,6 +917,15 @@ def borrow(X, dn, dn_cnt, distance, angle, line, local, width, flagged, corner, 
             if d < out[p] and d <= BORROW_WIDTH * width:
                 out[p] = d
                 angle_out[p] = angle[q]
+
+
+def fold_kinds(bend, angle):
+    """``(smooth, crease)`` masks of :func:`localise`'s fits from its ``bend`` and ``angle``
+    outputs: smooth folds (a quadric fits better: ``bend < SMOOTH_RATIO``) and soft folds that
+    two planes fit far better (``bend >= SHARP_RATIO`` and ``angle < SOFT_ANGLE``)."""
+    bend = np.asarray(bend)
+    with np.errstate(invalid="ignore"):
+        return bend < SMOOTH_RATIO, (bend >= SHARP_RATIO) & (np.asarray(angle) < SOFT_ANGLE)
 
 
 def band(distance, angle, width):

@@ -17,24 +17,27 @@ class SimplifyResult:
         Points kept at the requested count (frozen points always are; flagged points are sure
         of up to ``options.edge_share`` of it).
     boundary : bool (n,)
-        Points flagged on or near a sharp edge: within about one spacing of it. Up to
-        ``options.edge_share`` of the count, the **feature** points are sure of being kept
-        (never removed by the greedy): the flags and, in mode ``"coverage"``, the points near a
-        narrow smooth fold (a fillet a few spacings across, which at the kept spacing is an
-        edge too, but not a sharp one: :mod:`tiledsimplify.core.edge_fit`, "Smooth folds";
-        ``stats["n_features"]`` counts them) — all of them if they fit, else an even sample
-        along the lines, of the ``band`` alone where the band does not fit. The others compete
-        with the rest.
+        Points flagged on or near a sharp edge: within about one spacing of it (reported: the
+        LAS ``sharp_edge`` dimension). The flags change no kept point: what is kept is decided
+        by the ``features``.
+    features : bool (n,)
+        The points the simplification treats as edge points: in mode ``"coverage"`` those
+        within about one spacing of every line a two-plane fit found — the flags' sharp edges
+        and also narrow smooth folds (a fillet a few spacings across: at the kept spacing an
+        edge too, but not a sharp one; :mod:`tiledsimplify.core.edge_fit`, "Smooth folds"),
+        less the flags a crease lends beyond its band; in mode ``"paper"`` the flags. Up to
+        ``options.edge_share`` of the count they are sure of being kept (never removed by the
+        greedy): all of them if they fit, else an even sample along the lines — of the
+        ``band`` alone where the band does not fit; the others compete with the rest, and the
+        gap refinement keeps each within a cover radius of a kept point.
     band : bool (n,)
         The feature points nearest each line (mode ``"coverage"``: within
         ``options.edge_width`` local spacings of a fitted or borrowed two-plane line, 0.7 of
         that beside a soft edge — not the points a corner's three-plane fit flags,
         :func:`tiledsimplify.core.edge_fit._fit_corner`; mode ``"paper"``: every flagged
-        point): sampled first for the sure
-        points, and never swapped out by the gap refinement once kept (the other flagged
-        points may be, sure or not, but each stays within the refinement's edge cover radius
-        of a kept point, :func:`tiledsimplify.core.refine.edge_cover_radius`;
-        :mod:`tiledsimplify.core.edge_fit`, step 4). Flagged, but for the smooth folds'.
+        point): sampled first for the sure points, and never swapped out by the gap
+        refinement once kept (:func:`tiledsimplify.core.refine.edge_cover_radius`;
+        :mod:`tiledsimplify.core.edge_fit`, step 4).
     normals : float64 (n, 3)
         Unit normals of the input points (estimated on the full input).
     rank : int64 (n,)
@@ -65,6 +68,7 @@ class SimplifyResult:
     message: str = ""
     stats: dict = field(default_factory=dict)
     band: np.ndarray | None = None
+    features: np.ndarray | None = None
 
     @property
     def n(self):

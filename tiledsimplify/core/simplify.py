@@ -193,7 +193,10 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     ``"paper"``: the one-ring measure with the automatic threshold (§3.1); band, features and
     flags are the same. ``"coverage"``: the two-ring measure, candidates above the threshold,
     then :func:`_flags_of_fits` on their fitted lines — once with every line for the band and
-    the features, once without the smooth folds' for the flags.
+    the features (what the simplification keeps: the sure points, the refinement's edge
+    cover), once for the flags (what is reported) without the smooth folds' lines and with the
+    creases' lending as a sharp edge's (:func:`.edge_fit.fold_kinds`): the flags change no
+    kept point.
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
@@ -218,23 +221,27 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
     fitted, fitted_angle, line, local = np.empty(m), np.empty(m), np.empty((m, 6)), np.empty(m)
     corner = np.empty(m, dtype=bool)
-    smooth = np.empty(m, dtype=bool)
+    bend = np.empty(m)
     width = float(options.edge_width)
     edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, fitted,
                       fitted_angle, line, local, float(options.edge_angle), width, corner,
-                      smooth)
+                      bend)
     spacing = float(median_spacing(Xu) if spacing is None else spacing)
     distance = np.empty(m) if distance_out is None else distance_out
     band, features = _flags_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing,
                                     corner, distance)
+    smooth, crease = edge_fit.fold_kinds(bend, fitted_angle)
     flags = features
-    if smooth.any():
+    if smooth.any() or crease.any():
+        # a crease lends flags as far as a sharp edge does (its band stays the soft one)
         _, flags = _flags_of_fits(Xu, st, np.where(smooth, np.inf, fitted), fitted_angle, line,
-                                  local, width, spacing, corner, np.empty(m))
+                                  local, width, spacing, corner, np.empty(m),
+                                  np.where(crease, edge_fit.SOFT_ANGLE, fitted_angle))
     return deviation, band, features, flags, threshold
 
 
-def _flags_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing, corner, distance):
+def _flags_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing, corner, distance,
+                   lend_angle=None):
     """``(core band, flags)`` of the fitted lines (:func:`.edge_fit.localise`'s outputs).
 
     The core band: the candidates within ``width`` local spacings of a fitted line — their own
@@ -242,7 +249,8 @@ def _flags_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing, co
     (:func:`.edge_fit.borrow`; each point's distance to it into ``distance``) — less beside a
     soft edge (:func:`.edge_fit.band`). The flags add the points their own corner fit flags
     and every point within ``width`` spacings of a sharp fitted line near it
-    (:func:`.edge_fit.line_distances`).
+    (:func:`.edge_fit.line_distances`, which takes the fold of each line from ``lend_angle``,
+    by default ``fitted_angle``).
     """
     m = Xu.shape[0]
     angle = np.empty(m)
@@ -254,8 +262,9 @@ def _flags_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing, co
     at_corner = own & corner
     band = edge_fit.band(distance, angle, width) & ~at_corner
     near = np.full(m, np.inf)
-    edge_fit.line_distances(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width,
-                            spacing, corner, near)
+    edge_fit.line_distances(Xu, st.dn, st.dn_cnt, fitted,
+                            fitted_angle if lend_angle is None else lend_angle, line, local,
+                            width, spacing, corner, near)
     return band, band | at_corner | (near <= width)
 
 
@@ -505,9 +514,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
                           float((st.cnt == 0).mean()) if m else 0.0)
     lap("neighbours_normals")
     edge_distance = np.empty(m)
-    # ``flags_u``: every point on or near a sharp edge; ``features_u`` those and the points
-    # near a narrow smooth fold; ``band_u`` the features nearest their lines, sampled first for
-    # the sure points and never swapped out by the refinement
+    # ``flags_u``: every point on or near a sharp edge (reported only); ``features_u``: the
+    # points near every fitted line (smooth folds too), what the sure points are drawn from and
+    # the refinement keeps covered; ``band_u`` the features nearest their lines, sampled first
+    # for the sure points and never swapped out by the refinement
     deviation_u, band_u, features_u, flags_u, threshold = boundary_flags(
         Xu, st, options, edge_distance, spacing)
     lap("boundary")
@@ -533,7 +543,6 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
                                            band_u if band_u.sum() > goal else features_u,
                                            edge_distance, tie, goal, spacing)
     stats["n_edge_sure"] = int(anchor_u.sum())
-    stats["n_features"] = int(features_u[inverse].sum())
 
     # 5. progressive removal: duplicate copies first (importance 0), then the greedy sequence
     boundary = flags_u[inverse]
@@ -646,7 +655,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     importance = np.full(n, np.nan)
     importance[order[:cut]] = order_importance[:cut]
     if options.refines and cut == n_remove and to_target > 0:
-        keep_u, info = refine_coverage(Xu, keep[rep], fixed_u, tie=tie, edges=flags_u,
+        keep_u, info = refine_coverage(Xu, keep[rep], fixed_u, tie=tie, edges=features_u,
                                        edge_radius=edge_cover_radius(spacing, aim / m))
         rank, importance = _swap(keep, rank, importance, rep, keep_u, order, order_importance,
                                  cut)
@@ -665,9 +674,10 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     band = band_u[inverse]
     stats["n_boundary"] = int(boundary.sum())
     stats["n_edge_band"] = int(band.sum())
+    stats["n_features"] = int(features_u[inverse].sum())
     stats["threshold"] = threshold
     return SimplifyResult(
         keep=keep, boundary=boundary, normals=normals_u[inverse], rank=rank,
         importance=importance, deviation=deviation_u[inverse], threshold=threshold,
         order=order, order_importance=order_importance, target=target, message=message,
-        stats=stats, band=band)
+        stats=stats, band=band, features=features_u[inverse])

@@ -334,7 +334,7 @@ def refine_tile(store_path, tile, hausdorff, earlier=(), width=None, edge_radius
         addable = np.zeros(len(xyz), dtype=bool)
         addable[:n_core] = True
         edges = np.zeros(len(xyz), dtype=bool)
-        edges[:n_core] = store.read_result(tile, "boundary")
+        edges[:n_core] = store.read_result(tile, "feature")
         refined, info = refine_coverage(xyz, keep, fixed, addable=addable, watch=~addable,
                                         tie=coordinate_hash(xyz), edges=edges,
                                         edge_radius=edge_radius, before_out=before)

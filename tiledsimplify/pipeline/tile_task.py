@@ -24,9 +24,10 @@ from ..tiles import TileStore
 NORMAL_DTYPE = np.float32
 #: what a tile's results hold, saved in the store's settings: a store whose tiles saved other
 #: results is refused, not misread (until 2026-12-05 ``boundary`` was also what the gap
-#: refinement keeps, and ``protected`` the rest of it; now the flags reach one spacing from
-#: the edge and ``fixed`` holds what the refinement keeps)
-TILE_RESULTS = "step, importance, boundary, fixed, normal"
+#: refinement keeps, and ``protected`` the rest of it; then the flags reached one spacing from
+#: the edge and ``fixed`` held what the refinement keeps; since that night ``feature`` holds
+#: the points the refinement keeps covered, and ``boundary`` only the flags reported)
+TILE_RESULTS = "step, importance, boundary, feature, fixed, normal"
 
 
 def _ignore_tile_budget_warnings():
@@ -163,7 +164,9 @@ def simplify_tile(store_path, tile, options, threshold, depth, share=None):
     sequence, -1 if not reached), ``importance`` (at removal, NaN if not reached; with a
     simplified halo, the running maximum over the whole tile's sequence at that removal — the
     level the global cut compares, and a prefix of it is known exactly when the run stops at a
-    level), ``boundary`` (the flags), ``fixed`` (the flags' core band,
+    level), ``boundary`` (the flags), ``feature``
+    (:attr:`~tiledsimplify.core.result.SimplifyResult.features`: what the gap refinement keeps
+    within its edge cover radius of a kept point), ``fixed`` (the features' core band,
     :attr:`~tiledsimplify.core.result.SimplifyResult.band`, and the points whose boundary
     measure is above :data:`~tiledsimplify.core.refine.PROTECT` times the threshold,
     :func:`~tiledsimplify.core.refine.protected`: points the gap refinement keeps where the cut
@@ -178,6 +181,7 @@ def simplify_tile(store_path, tile, options, threshold, depth, share=None):
     step = np.full(n_core, -1, dtype=np.int64)
     imp = np.full(n_core, np.nan)
     boundary = np.zeros(n_core, dtype=bool)
+    feature = np.zeros(n_core, dtype=bool)
     fixed = np.zeros(n_core, dtype=bool)
     normal = np.zeros((n_core, 3), dtype=NORMAL_DTYPE)
     kind, value = depth
@@ -221,10 +225,11 @@ def simplify_tile(store_path, tile, options, threshold, depth, share=None):
         step[res.order[core]] = np.arange(n_steps)
         imp[res.order[core]] = at[core]
         boundary = res.boundary[:n_core]
+        feature = res.features[:n_core]
         fixed = res.band[:n_core] | protected(res.deviation[:n_core], res.threshold)
         normal = res.normals[:n_core].astype(NORMAL_DTYPE)
     store.write_result(tile, {"step": step, "importance": imp, "boundary": boundary,
-                              "fixed": fixed, "normal": normal}, overwrite=True,
+                              "feature": feature, "fixed": fixed, "normal": normal}, overwrite=True,
                        attrs={"exhausted": bool(exhausted), "steps": n_steps,
                               "known_level": known_level,
                               "depth": [kind, float(value)]})
