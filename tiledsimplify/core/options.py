@@ -167,8 +167,9 @@ class SimplifyOptions:
         above the subset's (:meth:`SimplifyResult.keep_at`) come from
         the sample, not the greedy.
     edge_share : float or None
-        ``"coverage"``: the most of the requested count that flagged (sharp-edge) points are
-        sure of. Where more are flagged, that many are kept for certain — an even sample
+        ``"coverage"``: the most of the requested count that feature points
+        (:attr:`SimplifyResult.features`: the flagged, sharp-edge ones and those on narrow
+        smooth folds) are sure of. Where there are more, that many are kept for certain — an even sample
         along the edges, the points of the core band (:attr:`SimplifyResult.band`) nearest
         their fitted edge line first, of the band alone where it holds more than that
         (:func:`tiledsimplify.core.prethin.edge_sample`) — and the rest stay flagged but
