@@ -1,9 +1,10 @@
 """Do the tiles show? Tiled vs untiled on the same cloud, same threshold, same count.
 
 Kept density in a band two spacings wide around internal tile faces, mean surface error,
-Hausdorff, sharp-edge coverage, and the share of flagged points within the refinement's edge
-cover radius of a kept point (``refine.edge_cover_radius``; tiled: each tile's core flags). Cases: the Bunny (35,947 points, 10 %) and a noisy line
-scan of Fandisk (~200k points, 20 %), each cut into >= 8 tiles; ``--scan-ratios`` runs the scan
+Hausdorff, sharp-edge coverage, and the share of feature points (the flags' edges and smooth
+folds: what the refinement covers) within its edge cover radius of a kept point
+(``refine.edge_cover_radius``; tiled: each tile's core features). Cases: the Bunny (35,947
+points, 10 %) and a noisy line scan of Fandisk (~200k points, 20 %), each cut into >= 8 tiles; ``--scan-ratios`` runs the scan
 at other ratios too (small ones: the cut's gaps outgrow the halo, see
 ``pipeline.tile_refine.refine_width``).
 
@@ -52,13 +53,14 @@ def case(name, X, ratio, tile_points, edges=None):
         t_untiled = time.perf_counter() - t
         sp = metrics.spacing(X)
         band = ts.plan.face_distance(X) < 2 * sp
-        # the flags each run keeps within the refinement's edge cover radius of a kept point
+        # the features (flags' edges and smooth folds) each run keeps within the refinement's
+        # edge cover radius of a kept point
         flags_t = np.zeros(len(X), dtype=bool)
         for i in range(ts.n_tiles):
-            flags_t[ts.core(i)[1]] = ts.read_result(i, "boundary")
+            flags_t[ts.core(i)[1]] = ts.read_result(i, "feature")
         radius = edge_cover_radius(s.spacing, ratio)
         rows = []
-        for label, k, secs, flags in (("untiled", keep_u, t_untiled, res_u.boundary),
+        for label, k, secs, flags in (("untiled", keep_u, t_untiled, res_u.features),
                                       ("tiled", keep_t, t_tiled, flags_t)):
             d = cKDTree(X[k]).query(X[flags])[0] if flags.any() else np.zeros(0)
             covered = f"{np.mean(d <= radius):.4f} of {int(flags.sum()):,}" if d.size else "–"
@@ -85,7 +87,7 @@ def main(argv=None):
                    help="comma-separated ratios of the Fandisk scan case (default 0.2)")
     args = p.parse_args(argv)
     print("| cloud | run | kept | band density / untiled | mean err (ratio) | Hausdorff "
-          "| edge cov. | flags within the cover radius | s |")
+          "| edge cov. | features within the cover radius | s |")
     print("|---|---|---:|---:|---:|---:|---:|---|---:|")
     X = read_points(DATA / "meshes" / "stanford_bunny" / "bun_zipper.ply.gz")
     for ratio in args.bunny_ratios:
