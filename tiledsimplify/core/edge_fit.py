@@ -142,9 +142,9 @@ SWEEP_SIDE = 0.2
 SMOOTH_RATIO = 0.5
 #: a soft fold (less than ``SOFT_ANGLE``) whose two planes fit its two-ring with at most
 #: 1 / this of one quadric height field's squared error is a **crease**: flags reach a full
-#: ``width`` from its line, as from a sharp edge's (:func:`fold_kinds`, the second argument of
-#: :func:`line_distances`' lenders). Soft folds lend no flags otherwise: most used to be
-#: fillets. Measured on the 38 quality cases (flags only; docs/measurements.md "Creases"):
+#: ``width`` from its line, as from a sharp edge's (:func:`fold_kinds`; the caller passes
+#: :func:`line_distances` the fold ``SOFT_ANGLE`` for it). Soft folds lend no flags otherwise:
+#: most used to be fillets. The features (what is kept) do not change. Measured on the 38 quality cases (flags only; docs/measurements.md "Creases"):
 #: boundary F1 geometric mean +1.2 % (idler_riser 0.868 -> 0.935, its noise-0.1 scan 0.545 ->
 #: 0.639, counter's 0.453 -> 0.534; plate_holes 0.793 -> 0.767); 2: +2.1 % but
 #: octagonal_pocket 0.856 -> 0.848 and plate_holes 0.690; every soft fold (0): +1.5 %,

@@ -178,11 +178,13 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     """Paper step 3: ``(deviation, core band, features, flags, threshold)`` as the options'
     mode says.
 
-    ``flags`` are the points reported on or near a sharp edge. ``features`` add the points
-    near a narrow smooth fold (:func:`.edge_fit.localise`: a fillet a few spacings across,
-    which two planes fit but one quadric fits better): at the kept spacing such a fold is an
-    edge too, so the sure points are sampled from the features, but it is not a sharp one, so
-    it is not reported. The ``core band`` (a subset of the features) holds the points nearest
+    ``flags`` are the points reported on or near a sharp edge; ``features`` the points near
+    every fitted line, which the simplification keeps like edges. They differ by the narrow
+    smooth folds (:func:`.edge_fit.fold_kinds`: a fillet a few spacings across, which two
+    planes fit but one quadric fits better), features but not flags — at the kept spacing
+    such a fold is an edge too, but not a sharp one — and by the creases (soft folds two
+    planes fit far better), whose flags reach as far as a sharp edge's, their features only
+    as far as a soft one's. The ``core band`` (a subset of the features) holds the points nearest
     each line, sampled first for the points kept for certain (up to ``edge_share``), which the
     refinement never swaps out. ``distance_out`` (optional, length m): filled in mode
     ``"coverage"`` with each point's distance to its fitted (or borrowed) line in local
