@@ -741,8 +741,10 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     elsewhere), ``local[p]`` = the local spacing (0 for points that are not candidates),
     ``corner[p]``: whether that line is a corner's (:func:`_fit_corner`), ``bend[p]``: the
     squared error of one quadric height field over the two-ring over that of the two planes
-    (:func:`_quadric_sse`, :func:`_two_plane_sse`; NaN where no two-plane fit found an edge,
-    ``inf`` where the planes fit exactly and the quadric does not) — below ``SMOOTH_RATIO`` a
+    (:func:`_quadric_sse`, :func:`_two_plane_sse`; NaN where no two-plane fit found an edge
+    within ``width`` local spacings — a farther line flags no point and lends to none, as
+    :func:`borrow` and :func:`line_distances` take only lines within ``width``, and so where a
+    corner's line replaced it — ``inf`` where the planes fit exactly and the quadric does not) — below ``SMOOTH_RATIO`` a
     smooth fold, at or above ``SHARP_RATIO`` a crease (:func:`fold_kinds`).
     ``min_angle``: the least fold of a sharp edge, in degrees (``MIN_ANGLE`` by default, the
     option ``edge_angle``; at most 90: the test is on the planes' angle, so wedges whose faces
@@ -789,7 +791,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
             continue
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
                                     line[p], max_cos)
-        if d < np.inf:
+        if d <= width * s:  # a farther line neither flags nor lends: its bend matters nowhere
             sse2 = _two_plane_sse(X, idx, c, side, c1, n1, c2, n2, work)
             sq = _quadric_sse(X, idx, c, s, c1, n1, c2, work, M6, r6)
             bend[p] = sq / sse2 if sse2 > 0.0 else (np.inf if sq > 0.0 else np.nan)
