@@ -593,13 +593,15 @@ def test_a_fillet_is_a_smooth_fold_and_an_edge_is_not():
     n = 6000
     h = np.sqrt(8.0 / n)  # 2 x 4 of faces: the points' mean spacing, about
     X, on_arc = _fillet(rng, n, 4.0 * h)
-    X, _, _, dist, ang, _, _, _, _, bend = _steps_1_2(X - X.mean(0))
-    assert np.isnan(bend[~np.isfinite(dist)]).all() and not np.isnan(bend[np.isfinite(dist)]).any()
+    X, _, _, dist, ang, _, _, corner, _, bend = _steps_1_2(X - X.mean(0))
+    # bend is measured where the point's own two-plane line is within width of it
+    near = dist <= 1.0
+    assert np.isnan(bend[~near | corner]).all() and not np.isnan(bend[near & ~corner]).any()
     smooth_fit = edge_fit.fold_kinds(bend, ang)[0]
     middle = np.abs(X[:, 1]) < 0.8  # off the patch's open ends
-    fits = np.isfinite(dist) & middle & on_arc
-    assert fits.sum() > 30
-    assert smooth_fit[fits].mean() > 0.8
+    fits = near & middle & on_arc
+    assert fits.sum() > 10, fits.sum()
+    assert smooth_fit[fits].mean() > 0.8, smooth_fit[fits].mean()
     for noise in (0.0, 0.1):
         E, _ = _fillet(rng, n, 0.0)
         E += noise * h * rng.normal(size=E.shape)
