@@ -588,7 +588,7 @@ def test_a_fillet_is_a_smooth_fold_and_an_edge_is_not():
     """A two-plane fit finds a fold on a fillet, but one quadric fits it better: ``localise``
     marks it smooth. At a sharp edge, noisy or not, two planes fit best. (Random points: the
     median nearest-neighbour distance is ~0.48 h, so the fillet's radius, 4 h, is ~8 of
-    those; at 1.5 h, ~3, a sixth of the fits on the arc are found smooth, measured.)"""
+    those; at 1.5 h, ~3, a fifth of the fits on the arc are found smooth, measured.)"""
     rng = np.random.default_rng(5)
     n = 6000
     h = np.sqrt(8.0 / n)  # 2 x 4 of faces: the points' mean spacing, about

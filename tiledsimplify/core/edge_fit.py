@@ -140,14 +140,14 @@ SWEEP_SIDE = 0.2
 #: well). 0.36: +2.6 % / +0.3 % (plate_holes 0.780, idler_riser 0.874); 1.0: plate_holes
 #: 0.823 but idler_riser 0.832 (recall 0.810 -> 0.732)
 SMOOTH_RATIO = 0.5
-#: a soft fold (less than ``SOFT_ANGLE``) whose two planes fit its two-ring with at most
-#: 1 / this of one quadric height field's squared error is a **crease**: flags reach a full
-#: ``width`` from its line, as from a sharp edge's (:func:`fold_kinds`; the caller passes
-#: :func:`line_distances` the fold ``SOFT_ANGLE`` for it). Soft folds lend no flags otherwise:
-#: most used to be fillets. The features (what is kept) do not change. Measured on the 38 quality cases (flags only; docs/measurements.md "Creases"):
-#: boundary F1 geometric mean +1.2 % (idler_riser 0.868 -> 0.935, its noise-0.1 scan 0.545 ->
-#: 0.639, counter's 0.453 -> 0.534; plate_holes 0.793 -> 0.767); 2: +2.1 % but
-#: octagonal_pocket 0.856 -> 0.848 and plate_holes 0.690; every soft fold (0): +1.5 %,
+#: a soft fold (less than ``SOFT_ANGLE``) whose two planes fit its two-ring with at most 1 / this
+#: of one quadric height field's squared error is a **crease**: flags reach a full ``width`` from
+#: its line, as from a sharp edge's (:func:`fold_kinds`; the caller passes :func:`line_distances`
+#: the fold ``SOFT_ANGLE`` for it). Soft folds lend no flags otherwise: most used to be fillets.
+#: The features (what is kept) do not change. Measured on the 38 quality cases (flags only;
+#: docs/measurements.md "Creases"): boundary F1 geometric mean +1.2 % (idler_riser 0.868 -> 0.935,
+#: its noise-0.1 scan 0.545 -> 0.639, counter's 0.453 -> 0.534; plate_holes 0.793 -> 0.767); 2:
+#: +2.1 % but octagonal_pocket 0.856 -> 0.848 and plate_holes 0.690; every soft fold (0): +1.5 %,
 #: plate_holes 0.571
 SHARP_RATIO = 4.0
 
@@ -277,7 +277,8 @@ def _seed_by_normals(normals, idx, c, side):
     b = _least_parallel(normals, idx, c, a)
     for j in range(c):
         q = idx[j]
-        side[j] = 0 if abs(_dot(normals, a, normals, q)) >= abs(_dot(normals, b, normals, q)) else 1
+        da, db = abs(_dot(normals, a, normals, q)), abs(_dot(normals, b, normals, q))
+        side[j] = 0 if da >= db else 1
 
 
 @jit_inline
@@ -543,8 +544,6 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
 CORNER_RMS = 0.3
 
 
-
-
 @jit
 def _fit_corner(X, normals, idx, c, side, cen, nrm, work, spacing, line, tmp, max_cos, proj,
                 outer):
@@ -723,12 +722,15 @@ def _quadric_sse(X, idx, c, spacing, normal, t1, t2, work, M, r):
 
 
 @jit_leaf
-def _two_plane_sse(X, idx, c, side, c1, n1, c2, n2, work):
-    """Sum of squared distances of the points of a two-plane split to their planes."""
-    k0 = _plane_fit(X, idx, c, side, 0, c1, n1, work)
-    r0 = work[0]
-    k1 = _plane_fit(X, idx, c, side, 1, c2, n2, work)
-    return k0 * r0 * r0 + k1 * work[0] * work[0]
+def _two_plane_sse(X, idx, c, side, c1, n1, c2, n2):
+    """Sum of squared distances of the points of a two-plane split to their planes: the planes
+    :func:`_fit_edge` leaves in ``c1, n1`` (side 0) and ``c2, n2`` (side 1)."""
+    sse = 0.0
+    for j in range(c):
+        d = (_plane_distance(X, idx[j], c1, n1) if side[j] == 0
+             else _plane_distance(X, idx[j], c2, n2))
+        sse += d * d
+    return sse
 
 
 @jit
@@ -744,8 +746,9 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     (:func:`_quadric_sse`, :func:`_two_plane_sse`; NaN where no two-plane fit found an edge
     within ``width`` local spacings — a farther line flags no point and lends to none, as
     :func:`borrow` and :func:`line_distances` take only lines within ``width``, and so where a
-    corner's line replaced it — ``inf`` where the planes fit exactly and the quadric does not) — below ``SMOOTH_RATIO`` a
-    smooth fold, at or above ``SHARP_RATIO`` a crease (:func:`fold_kinds`).
+    corner's line replaced it — ``inf`` where the planes fit exactly and the quadric does
+    not): below ``SMOOTH_RATIO`` a smooth fold, at or above ``SHARP_RATIO`` a crease
+    (:func:`fold_kinds`).
     ``min_angle``: the least fold of a sharp edge, in degrees (``MIN_ANGLE`` by default, the
     option ``edge_angle``; at most 90: the test is on the planes' angle, so wedges whose faces
     meet at less than it are not found either).
@@ -792,7 +795,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
                                     line[p], max_cos)
         if d <= width * s:  # a farther line neither flags nor lends: its bend matters nowhere
-            sse2 = _two_plane_sse(X, idx, c, side, c1, n1, c2, n2, work)
+            sse2 = _two_plane_sse(X, idx, c, side, c1, n1, c2, n2)
             sq = _quadric_sse(X, idx, c, s, c1, n1, c2, work, M6, r6)
             bend[p] = sq / sse2 if sse2 > 0.0 else (np.inf if sq > 0.0 else np.nan)
         out[p] = d / s

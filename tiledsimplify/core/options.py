@@ -169,13 +169,14 @@ class SimplifyOptions:
     edge_share : float or None
         ``"coverage"``: the most of the requested count that feature points
         (:attr:`SimplifyResult.features`: the flagged, sharp-edge ones and those on narrow
-        smooth folds) are sure of. Where there are more, that many are kept for certain — an even sample
-        along the edges, the points of the core band (:attr:`SimplifyResult.band`) nearest
-        their fitted edge line first, of the band alone where it holds more than that
-        (:func:`tiledsimplify.core.prethin.edge_sample`) — and the rest stay flagged but
-        compete with the rest of the cloud. At small targets the flags alone would otherwise
-        take the whole count and leave the faces empty (Fandisk at 5 %: 1,524 flags for a
-        count of 824, all kept: mean surface error 10x the best peer's). A value in (0, 1], or
+        smooth folds) are sure of. Where there are more, that many are kept for certain — an
+        even sample along the lines, the points of the core band (:attr:`SimplifyResult.band`)
+        nearest their fitted line first, of the band alone where it holds more than that
+        (:func:`tiledsimplify.core.prethin.edge_sample`) — and the rest (still flagged where
+        they are) compete with the rest of the cloud. At small targets the flags alone would
+        otherwise take the whole count and leave the faces empty (Fandisk at 5 %: 1,524 flags
+        for a count of 824, all kept: mean surface error 10x the best peer's). A value in (0,
+        1], or
         ``inf``: every flagged point kept whatever the count (as until 2026-12-05; the count
         may then be missed). None: the mode's default (``"coverage"``: :data:`EDGE_SHARE`,
         0.4; ``"paper"``: ``inf``, as published). A tiled run applies it to each tile's share

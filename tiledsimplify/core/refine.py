@@ -18,14 +18,14 @@ point:
    try again, and stop when it falls below ``min_step`` or after ``max_rounds`` tries.
 
 **The flags' cover** (``edges``, ``edge_radius``; 2026-12-05 — the caller's edge points, which
-:func:`.simplify.simplify_points` gives as its features since that night: the flagged points
-and those on narrow smooth folds, :attr:`.result.SimplifyResult.features`): before the
-rounds, flagged points farther than the radius from the kept set are added (farthest first, among the flags
-alone) and as many kept points thinned at the level ``H`` itself, so ``H`` does not rise; the
-flags added stay fixed. In every round a flagged point's distance counts ``τ / radius`` times
-in the thinning (its *scale*), so no removal leaves it beyond the radius. Without it the rounds
-traded the flags outside the core band for the Hausdorff distance and opened gaps along the
-edges (:data:`EDGE_COVER`).
+:func:`.simplify.simplify_points` gives as its features since that night: the flagged points and
+those on narrow smooth folds, :attr:`.result.SimplifyResult.features`): before the rounds,
+flagged points farther than the radius from the kept set are added (farthest first, among the
+flags alone) and as many kept points thinned at the level ``H`` itself, so ``H`` does not rise;
+the flags added stay fixed. In every round a flagged point's distance counts ``τ / radius``
+times in the thinning (its *scale*), so no removal leaves it beyond the radius. Without it the
+rounds traded the flags outside the core band for the Hausdorff distance and opened gaps along
+the edges (:data:`EDGE_COVER`).
 
 Every committed round lowers the Hausdorff distance by at least ``min_step · H``; a failed one
 changes nothing. So the result never has a larger Hausdorff distance than the input kept set.

@@ -14,7 +14,7 @@ class SimplifyResult:
     Attributes
     ----------
     keep : bool (n,)
-        Points kept at the requested count (frozen points always are; flagged points are sure
+        Points kept at the requested count (frozen points always are; ``features`` are sure
         of up to ``options.edge_share`` of it).
     boundary : bool (n,)
         Points flagged on or near a sharp edge: within about one spacing of it (reported: the
@@ -24,8 +24,9 @@ class SimplifyResult:
         The points the simplification treats as edge points: in mode ``"coverage"`` those
         within about one spacing of every line a two-plane fit found — the flags' sharp edges
         and also narrow smooth folds (a fillet a few spacings across: at the kept spacing an
-        edge too, but not a sharp one; :mod:`tiledsimplify.core.edge_fit`, "Smooth folds"),
-        less the flags a crease lends beyond its band; in mode ``"paper"`` the flags. Up to
+        edge too, but not a sharp one; :mod:`tiledsimplify.core.edge_fit`, "Smooth folds") —
+        but beside a crease only its soft band, where its flags reach a full spacing; in mode
+        ``"paper"`` the flags. Up to
         ``options.edge_share`` of the count they are sure of being kept (never removed by the
         greedy): all of them if they fit, else an even sample along the lines — of the
         ``band`` alone where the band does not fit; the others compete with the rest, and the

@@ -674,12 +674,13 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
                                 frozen=n_f)
         warnings.warn(message, BudgetWarning, stacklevel=2)
     band = band_u[inverse]
+    features = features_u[inverse]
     stats["n_boundary"] = int(boundary.sum())
     stats["n_edge_band"] = int(band.sum())
-    stats["n_features"] = int(features_u[inverse].sum())
+    stats["n_features"] = int(features.sum())
     stats["threshold"] = threshold
     return SimplifyResult(
         keep=keep, boundary=boundary, normals=normals_u[inverse], rank=rank,
         importance=importance, deviation=deviation_u[inverse], threshold=threshold,
         order=order, order_importance=order_importance, target=target, message=message,
-        stats=stats, band=band, features=features_u[inverse])
+        stats=stats, band=band, features=features)
