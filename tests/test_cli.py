@@ -546,8 +546,8 @@ def test_edge_angle_reaches_both_commands(tmp_path, caplog):
 
 def test_edge_share_reaches_both_commands(tmp_path, caplog):
     """``--edge-share``: on a roof whose ridge flags more points than a 0.5 % count, the default
-    keeps the count (exit 0) with some flagged points; ``inf`` keeps every flagged point and
-    misses it (exit 3); a share outside (0, 1] fails before any work, naming the option."""
+    keeps the count (exit 0) with some flagged points; ``inf`` keeps every feature point (most
+    of them flagged) and misses it (exit 3); a share outside (0, 1] fails before any work, naming the option."""
     path = _roof(tmp_path, 90.0)
     for command in ("simplify", "run"):
         got = {}
@@ -558,7 +558,8 @@ def test_edge_share_reaches_both_commands(tmp_path, caplog):
                 == code, (command, share)
             got[share] = np.load(out)
         assert len(got[None]) == 40 and 0 < got[None]["sharp_edge"].sum() <= 16, command
-        assert len(got["inf"]) == got["inf"]["sharp_edge"].sum() > 40, command
+        # every feature point kept: the flagged ones and the band's few a little farther
+        assert len(got["inf"]) > 40 and got["inf"]["sharp_edge"].sum() >= 0.8 * len(got["inf"])
         _refused(caplog, command, path, tmp_path / f"{command}_bad.npy", "0.005",
                  "--edge-share", "2", "options.edge_share must be a share of the count")
 

@@ -351,6 +351,47 @@ def test_line_distances_equal_a_naive_search(data_dir):
             assert (out[reached] <= width).sum() > 1.2 * (dist <= width).sum()
 
 
+def _naive_nearest_lines(X, dn, dn_cnt, lender, line, reach, spacing):
+    """:func:`edge_fit.nearest_line_distances` by Python sets: each lender's points reached
+    through the local mesh within ``reach`` of it, each point's ``FLAG_FITS`` nearest of the
+    lenders reaching it (ties to the lower index), its least distance to their lines."""
+    reached = [[] for _ in range(len(X))]
+    for q in np.flatnonzero(lender):
+        seen, todo = {int(q)}, [int(q)]
+        while todo:
+            r = todo.pop()
+            reached[r].append((float(np.sum((X[r] - X[q]) ** 2)), int(q)))
+            for t in dn[r, :dn_cnt[r]].tolist():
+                if t not in seen:
+                    seen.add(t)
+                    if np.sum((X[t] - X[q]) ** 2) <= reach * reach:
+                        todo.append(t)
+        assert len(seen) < edge_fit.MAX_REACH_POINTS  # the walk's cap never cut this one
+    out = np.full(len(X), np.inf)
+    for p, near in enumerate(reached):
+        for _, q in sorted(near)[:edge_fit.FLAG_FITS]:
+            out[p] = min(out[p], np.linalg.norm(np.cross(X[p] - line[q, :3], line[q, 3:])))
+    return out / spacing
+
+
+def test_nearest_line_distances_equal_a_naive_search(data_dir):
+    """The flags' distances by Python loops, on the noisy Fandisk scan; fewer lenders (every
+    other one) reach fewer points, farther."""
+    X, st, cand, dist, ang, line, local, corner = _fitted_scan(data_dir)
+    lender = (dist <= 1.0) & (ang >= edge_fit.SOFT_ANGLE) & ~corner
+    assert lender.sum() > 100
+    spacing = float(np.median(local[cand]))
+    reached = []
+    for mask, reach in ((lender, 4.0 * spacing), (lender, 2.0 * spacing),
+                        (lender & (np.arange(len(X)) % 2 == 0), 4.0 * spacing)):
+        out = np.empty(len(X))
+        edge_fit.nearest_line_distances(X, st.dn, st.dn_cnt, mask, line, reach, spacing, out)
+        ref = _naive_nearest_lines(X, st.dn, st.dn_cnt, mask, line, reach, spacing)
+        np.testing.assert_allclose(out, ref, rtol=1e-12)
+        reached.append(np.isfinite(out).sum())
+    assert reached[0] > 3 * lender.sum() and reached[0] > max(reached[1:]), reached
+
+
 @pytest.mark.parametrize("part, scan, least, band_below", [
     ("idler_riser", False, 0.85, 0.81),  # 0.874 against 0.799
     ("plate_holes", True, 0.75, 0.55),  # 0.775 against 0.481
@@ -384,10 +425,11 @@ def test_flags_reach_one_spacing_beside_the_band(data_dir, monkeypatch, part, sc
     refined = simplify_points(X, ratio=0.05)
     monkeypatch.setattr(edge_fit, "line_distances", lambda *args: None)  # the band alone
     alone = simplify_points(X, ratio=0.05, options={"refine": False})
-    # (and the points their own corner fit flags, which are flags and not band in both)
+    # (and the points their own corner fit flags, which are features and not band in both)
     np.testing.assert_array_equal(alone.band, small.band)
-    corners = alone.boundary & ~alone.band
-    assert (corners <= small.boundary).all() and corners.sum() < 0.1 * small.band.sum()
+    corners = alone.features & ~alone.band
+    assert (corners <= small.features).all() and corners.sum() < 0.1 * small.band.sum()
+    np.testing.assert_array_equal(alone.boundary, small.boundary)  # the flags: their own
     for name in ("keep", "rank", "importance", "order"):
         np.testing.assert_array_equal(getattr(alone, name), getattr(small, name))
     np.testing.assert_array_equal(refined.order, small.order)  # the refinement swaps keep only
@@ -617,29 +659,31 @@ def test_fillets_are_kept_like_edges_but_not_flagged(data_dir, monkeypatch):
     """plate_holes at 20 % (the quality benchmark's case): its fillets' points were 453 of the
     1,025 points their own two-plane fit flagged (precision 0.584 over all flags). Smooth
     folds are no longer flags, but they are still features: the sure points, the core band
-    and the refinement's edge cover take them, so the flags change no kept point."""
+    and the refinement's edge cover take them, so the flags change no kept point. Without
+    them, a fillet whose two planes fit better than a quadric would be a crease and lend
+    flags (precision 0.683, not 0.750)."""
     X, seg, s = _plate_holes(data_dir)
     res = simplify_points(X, ratio=0.2)
     det = metrics.boundary_detection(X, res.boundary, edge_segments=seg, spacing=s)
-    assert det["precision"] >= 0.65 and det["recall"] >= 0.84  # 0.686 / 0.870 measured
+    assert det["precision"] >= 0.72 and det["recall"] >= 0.86  # 0.750 / 0.885 measured
     assert (res.band & ~res.boundary).sum() > 50 and (res.features >= res.band).all()
-    # every fold taken as a sharp edge's (no smooth folds, no creases): the flags are the
-    # features, and every kept point is the same
+    # no smooth folds (creases still by their bend): every kept point is the same, the
+    # flags lose their precision
+    kinds = edge_fit.fold_kinds
     monkeypatch.setattr(edge_fit, "fold_kinds",
-                        lambda bend, angle: (np.zeros(len(bend), bool),) * 2)
+                        lambda bend, angle: (np.zeros(len(bend), bool), kinds(bend, angle)[1]))
     plain = simplify_points(X, ratio=0.2)
     for name in ("keep", "rank", "order", "band", "features"):
         np.testing.assert_array_equal(getattr(plain, name), getattr(res, name))
-    np.testing.assert_array_equal(plain.boundary, plain.features)
     assert metrics.boundary_detection(X, plain.boundary, edge_segments=seg,
-                                      spacing=s)["precision"] < 0.6
+                                      spacing=s)["precision"] < 0.71
 
 
 def test_creases_flag_as_far_as_sharp_edges(data_dir, monkeypatch):
     """idler_riser (20k points, 20 %): its edges fold by 45-60°, soft, whose band is narrower
     and whose lines lend no flags — but where two planes fit the two-ring four times better
     than one quadric, the fold is a crease and lends them as a sharp edge does: recall
-    0.79 -> 0.91, F1 0.868 -> 0.935."""
+    0.73 -> 0.91, F1 0.833 -> 0.939."""
     V, F = read_mesh(data_dir / "meshes" / "trimesh_cad" / "idler_riser.STL")
     X, _ = synthetic.sample_surface_even(V, F, 20_000, seed=0, tol=0.001)
     seg, s = V[synthetic.sharp_edges(V, F)], synthetic.spacing(X)
@@ -652,5 +696,7 @@ def test_creases_flag_as_far_as_sharp_edges(data_dir, monkeypatch):
     f1_before = metrics.boundary_detection(X, no_crease.boundary, edge_segments=seg,
                                            spacing=s)["f1"]
     assert f1 >= 0.92 and f1_before < 0.88, (f1, f1_before)
-    assert (res.boundary >= no_crease.boundary).all()
+    recall = [metrics.boundary_detection(X, r.boundary, edge_segments=seg, spacing=s)["recall"]
+              for r in (res, no_crease)]
+    assert recall[0] > recall[1] + 0.1, recall  # 0.909 against 0.729
     np.testing.assert_array_equal(res.keep, no_crease.keep)

@@ -1492,7 +1492,7 @@ def test_edge_share_in_tiles_agrees_between_passes(tmp_path):
     flags are an even sample of them, the same in every pass over it (the global target's
     share, as the pre-thinning aims at): tiles first run far (floor 0.05) or stopped at their
     share (floor 0.99, then deeper passes) give the same bytes, and the count is met — with
-    every flagged point kept it could not be."""
+    every feature point kept it could not be."""
     rng = np.random.default_rng(8)
     xy = rng.random((12000, 2)) * [2.0, 3.0] - [1.0, 0.0]
     X = np.c_[xy, -np.abs(xy[:, 0])]  # a roof folding by 90° along x = 0
@@ -1505,7 +1505,9 @@ def test_edge_share_in_tiles_agrees_between_passes(tmp_path):
     assert (tmp_path / "a.npy").read_bytes() == (tmp_path / "b.npy").read_bytes()
     every = run(path, tmp_path / "c.npy", ratio=0.01, tile_points=2000,
                 options={"edge_share": float("inf")})
-    assert not every.reached and every.n_output == every.n_boundary > 120
+    # every feature point kept: the flagged ones and the band's few a little farther
+    assert not every.reached and every.n_output > 120
+    assert 0.8 * every.n_output <= every.n_boundary <= every.n_output
     assert 0 < a.n_boundary < 0.6 * 120  # flagged points kept: at most the share, and a few
 
 

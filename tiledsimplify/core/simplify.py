@@ -178,27 +178,23 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     """Paper step 3: ``(deviation, core band, features, flags, threshold)`` as the options'
     mode says.
 
-    ``flags`` are the points reported on or near a sharp edge; ``features`` the points near
-    every fitted line, which the simplification keeps like edges. They differ by the narrow
-    smooth folds (:func:`.edge_fit.fold_kinds`: a fillet a few spacings across, which two
-    planes fit but one quadric fits better), features but not flags — at the kept spacing
-    such a fold is an edge too, but not a sharp one — and by the creases (soft folds two
-    planes fit far better), whose flags reach as far as a sharp edge's, their features only
-    as far as a soft one's. The ``core band`` (a subset of the features) holds the points nearest
-    each line, sampled first for the points kept for certain (up to ``edge_share``), which the
-    refinement never swaps out. ``distance_out`` (optional, length m): filled in mode
-    ``"coverage"`` with each point's distance to its fitted (or borrowed) line in local
-    spacings (``inf``: none), what :func:`.prethin.edge_sample` orders by; ``inf`` everywhere
-    in mode ``"paper"``.
-    ``spacing``: the cloud's point spacing (:func:`.edge_fit.line_distances`; None: measured).
+    ``features`` are the points near every fitted line, which the simplification keeps like
+    edges; ``flags`` the points reported on or near a sharp edge, which change no kept point.
+    The features include the narrow smooth folds (:func:`.edge_fit.fold_kinds`: a fillet a few
+    spacings across, which two planes fit but one quadric fits better — at the kept spacing an
+    edge too, but not a sharp one); the flags do not. The ``core band`` (a subset of the
+    features) holds the points nearest each line, sampled first for the points kept for
+    certain (up to ``edge_share``), which the refinement never swaps out. ``distance_out``
+    (optional, length m): filled in mode ``"coverage"`` with each point's distance to its
+    fitted (or borrowed) line in local spacings (``inf``: none), what
+    :func:`.prethin.edge_sample` orders by; ``inf`` everywhere in mode ``"paper"``.
+    ``spacing``: the cloud's point spacing (None: measured), the flags' unit.
 
     ``"paper"``: the one-ring measure with the automatic threshold (§3.1); band, features and
     flags are the same. ``"coverage"``: the two-ring measure, candidates above the threshold,
-    then :func:`_flags_of_fits` on their fitted lines — once with every line for the band and
-    the features (what the simplification keeps: the sure points, the refinement's edge
-    cover), once for the flags (what is reported) without the smooth folds' lines and with the
-    creases' lending as a sharp edge's (:func:`.edge_fit.fold_kinds`): the flags change no
-    kept point.
+    a fitted line each (:func:`.edge_fit.localise`), then the band and features of every line
+    (:func:`_features_of_fits`) and the flags of the sharp ones and the creases
+    (:func:`_flags`: within ``edge_width`` cloud spacings of the nearest of them).
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
@@ -230,43 +226,53 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
                       bend)
     spacing = float(median_spacing(Xu) if spacing is None else spacing)
     distance = np.empty(m) if distance_out is None else distance_out
-    band, features = _flags_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing,
-                                    corner, distance)
+    band, features = _features_of_fits(Xu, st, fitted, fitted_angle, line, local, width,
+                                       spacing, corner, distance)
+    return deviation, band, features, _flags(Xu, st, fitted, fitted_angle, line, width, spacing,
+                                             corner, bend), threshold
+
+
+def _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend):
+    """The flags of :func:`.edge_fit.localise`'s fits: the points within ``width`` cloud
+    ``spacing``s of the line of one of their nearest lenders
+    (:func:`.edge_fit.nearest_line_distances`) — the fits within ``width`` of their own line on
+    a sharp edge (a fold of ``SOFT_ANGLE`` or more) or a crease (:func:`.edge_fit.fold_kinds`),
+    not smooth folds nor corners — and the points their own corner fit flags."""
     smooth, crease = edge_fit.fold_kinds(bend, fitted_angle)
-    flags = features
-    if smooth.any() or crease.any():
-        # a crease lends flags as far as a sharp edge does (its band stays the soft one)
-        _, flags = _flags_of_fits(Xu, st, np.where(smooth, np.inf, fitted), fitted_angle, line,
-                                  local, width, spacing, corner, np.empty(m),
-                                  np.where(crease, edge_fit.SOFT_ANGLE, fitted_angle))
-    return deviation, band, features, flags, threshold
+    at_corner = edge_fit.band(fitted, fitted_angle, width) & corner
+    if not spacing > 0:
+        return at_corner
+    lender = ((fitted <= width) & ~smooth & ~corner
+              & ((fitted_angle >= edge_fit.SOFT_ANGLE) | crease))
+    near = np.empty(Xu.shape[0])
+    edge_fit.nearest_line_distances(Xu, st.dn, st.dn_cnt, lender, line,
+                                    edge_fit.FLAG_REACH * spacing, spacing, near)
+    return at_corner | (near <= width)
 
 
-def _flags_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing, corner, distance,
-                   lend_angle=None):
-    """``(core band, flags)`` of the fitted lines (:func:`.edge_fit.localise`'s outputs).
+def _features_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing, corner,
+                      distance):
+    """``(core band, features)`` of the fitted lines (:func:`.edge_fit.localise`'s outputs).
 
     The core band: the candidates within ``width`` local spacings of a fitted line — their own
     or, where that does not flag them (no fit, or a farther line), a flagged neighbour's
     (:func:`.edge_fit.borrow`; each point's distance to it into ``distance``) — less beside a
-    soft edge (:func:`.edge_fit.band`). The flags add the points their own corner fit flags
+    soft edge (:func:`.edge_fit.band`). The features add the points their own corner fit flags
     and every point within ``width`` spacings of a sharp fitted line near it
-    (:func:`.edge_fit.line_distances`, which takes the fold of each line from ``lend_angle``,
-    by default ``fitted_angle``).
+    (:func:`.edge_fit.line_distances`).
     """
     m = Xu.shape[0]
     angle = np.empty(m)
     own = edge_fit.band(fitted, fitted_angle, width)
     edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width, own, corner,
                     distance, angle)
-    # points their own corner fit flags are flags, not the core band: the band is sure of
+    # points their own corner fit flags are features, not the core band: the band is sure of
     # being kept and never swapped out, and a corner's line ends at the corner
     at_corner = own & corner
     band = edge_fit.band(distance, angle, width) & ~at_corner
     near = np.full(m, np.inf)
-    edge_fit.line_distances(Xu, st.dn, st.dn_cnt, fitted,
-                            fitted_angle if lend_angle is None else lend_angle, line, local,
-                            width, spacing, corner, near)
+    edge_fit.line_distances(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width,
+                            spacing, corner, near)
     return band, band | at_corner | (near <= width)
 
 
