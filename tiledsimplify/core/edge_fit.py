@@ -460,6 +460,13 @@ def _edge_line(c1, n1, c2, n2, line):
 
 
 @jit_leaf
+def _squared_distance(X, p, q):
+    """``|X[p] - X[q]|²``."""
+    dx, dy, dz = X[p, 0] - X[q, 0], X[p, 1] - X[q, 1], X[p, 2] - X[q, 2]
+    return dx * dx + dy * dy + dz * dz
+
+
+@jit_leaf
 def _line_distance(X, p, line):
     """Distance from ``X[p]`` to the line ``line`` (:func:`_edge_line`): ``|(x - a) × u|``."""
     vx, vy, vz = X[p, 0] - line[0], X[p, 1] - line[1], X[p, 2] - line[2]
@@ -901,9 +908,11 @@ def nearest_line_distances(X, dn, dn_cnt, lender, line, reach, spacing, out):
     """
     n = X.shape[0]
     k = FLAG_FITS
-    best_d = np.full((n, k), np.inf)
-    best_q = np.full((n, k), -1, dtype=np.int64)
-    mark = np.zeros(n, dtype=np.int64)
+    # each point's nearest lenders so far, nearest first (-1: none); int32 as ``dn``'s ids,
+    # their distances measured again where compared: the flags' peak memory is 16 bytes a
+    # point more than the boundary stage's own
+    best = np.full((n, k), -1, dtype=np.int32)
+    mark = np.zeros(n, dtype=np.int32)
     ring = np.empty(MAX_REACH_POINTS, dtype=np.int64)
     r2 = reach * reach
     for q in range(n):
@@ -916,30 +925,27 @@ def nearest_line_distances(X, dn, dn_cnt, lender, line, reach, spacing, out):
         while i < c:
             r = ring[i]
             i += 1
-            dx, dy, dz = X[r, 0] - X[q, 0], X[r, 1] - X[q, 1], X[r, 2] - X[q, 2]
-            d2 = dx * dx + dy * dy + dz * dz
-            # insert q among r's k nearest lenders (kept sorted, ascending)
-            if d2 < best_d[r, k - 1]:
-                j = k - 1
-                while j > 0 and d2 < best_d[r, j - 1]:
-                    best_d[r, j] = best_d[r, j - 1]
-                    best_q[r, j] = best_q[r, j - 1]
-                    j -= 1
-                best_d[r, j] = d2
-                best_q[r, j] = q
+            d2 = _squared_distance(X, r, q)
+            # q's place among r's k nearest lenders (after any as near: lower index first)
+            j = k
+            while j > 0 and (best[r, j - 1] < 0 or d2 < _squared_distance(X, r, best[r, j - 1])):
+                j -= 1
+            if j < k:
+                for t in range(k - 1, j, -1):
+                    best[r, t] = best[r, t - 1]
+                best[r, j] = q
             for j in range(dn_cnt[r]):
                 s = dn[r, j]
                 if mark[s] == q + 1 or c >= MAX_REACH_POINTS:
                     continue
                 mark[s] = q + 1
-                ex, ey, ez = X[s, 0] - X[q, 0], X[s, 1] - X[q, 1], X[s, 2] - X[q, 2]
-                if ex * ex + ey * ey + ez * ez <= r2:
+                if _squared_distance(X, s, q) <= r2:
                     ring[c] = s
                     c += 1
     for p in range(n):
         d = np.inf
         for j in range(k):
-            q = best_q[p, j]
+            q = best[p, j]
             if q >= 0:
                 d = min(d, _line_distance(X, p, line[q]))
         out[p] = d / spacing
