@@ -858,8 +858,9 @@ def line_distances(X, dn, dn_cnt, fitted, angle, line, local, width, spacing, co
     corner) — the lenders of :func:`borrow` — in units of ``max(local[q],
     spacing)``: the larger of ``q``'s local spacing and the cloud's.
 
-    Beyond the paper. The core band (:func:`band` of steps 2-3) misses the points a little off
-    the line whose own measure stays below ``CANDIDATE`` (idler_riser's 45-70° folds: 770 of
+    Beyond the paper; the features' reach (the flags' until 2026-12-06, when this was measured
+    on them; now :func:`nearest_line_distances`). The core band (:func:`band` of steps 2-3)
+    misses the points a little off the line whose own measure stays below ``CANDIDATE`` (idler_riser's 45-70° folds: 770 of
     its 4,304 points within one spacing of an edge) and, on scans, the rows beyond a local
     spacing that overlapping views shrink (the tray scan's lenders: 0.22 of the cloud's median
     nearest-neighbour distance). Measured on the 36 CAD quality cases (flags

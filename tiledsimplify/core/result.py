@@ -17,15 +17,16 @@ class SimplifyResult:
         Points kept at the requested count (frozen points always are; ``features`` are sure
         of up to ``options.edge_share`` of it).
     boundary : bool (n,)
-        Points flagged on or near a sharp edge: within about one spacing of it (reported: the
-        LAS ``sharp_edge`` dimension). The flags change no kept point: what is kept is decided
-        by the ``features``.
+        Points flagged on or near a sharp edge: in mode ``"coverage"`` within one cloud spacing
+        (``edge_width``) of the line of one of their nearest fits on a sharp edge or crease
+        (reported: the LAS ``sharp_edge`` dimension). The flags change no kept point: what is
+        kept is decided by the ``features``.
     features : bool (n,)
         The points the simplification treats as edge points: in mode ``"coverage"`` those
         within about one spacing of every line a two-plane fit found — the flags' sharp edges
         and also narrow smooth folds (a fillet a few spacings across: at the kept spacing an
         edge too, but not a sharp one; :mod:`tiledsimplify.core.edge_fit`, "Smooth folds") —
-        but beside a crease only its soft band, where its flags reach a full spacing; in mode
+        but beside a crease only its soft band; in mode
         ``"paper"`` the flags. Up to
         ``options.edge_share`` of the count they are sure of being kept (never removed by the
         greedy): all of them if they fit, else an even sample along the lines — of the
