@@ -351,22 +351,30 @@ def test_line_distances_equal_a_naive_search(data_dir):
             assert (out[reached] <= width).sum() > 1.2 * (dist <= width).sum()
 
 
+def _naive_reach(X, dn, dn_cnt, q, reach):
+    """The points within ``reach`` of ``X[q]`` reached from it through the local mesh, by a
+    Python set (any order)."""
+    seen, todo, reached = {int(q)}, [int(q)], []
+    while todo:
+        r = todo.pop()
+        reached.append(r)
+        for t in dn[r, :dn_cnt[r]].tolist():
+            if t not in seen:
+                seen.add(t)
+                if np.sum((X[t] - X[q]) ** 2) <= reach * reach:
+                    todo.append(t)
+    assert len(seen) < edge_fit.MAX_REACH_POINTS  # the walk's cap never cut this one
+    return reached
+
+
 def _naive_nearest_lines(X, dn, dn_cnt, lender, line, reach, spacing):
     """:func:`edge_fit.nearest_line_distances` by Python sets: each lender's points reached
     through the local mesh within ``reach`` of it, each point's ``FLAG_FITS`` nearest of the
     lenders reaching it (ties to the lower index), its least distance to their lines."""
     reached = [[] for _ in range(len(X))]
     for q in np.flatnonzero(lender):
-        seen, todo = {int(q)}, [int(q)]
-        while todo:
-            r = todo.pop()
+        for r in _naive_reach(X, dn, dn_cnt, q, reach):
             reached[r].append((float(np.sum((X[r] - X[q]) ** 2)), int(q)))
-            for t in dn[r, :dn_cnt[r]].tolist():
-                if t not in seen:
-                    seen.add(t)
-                    if np.sum((X[t] - X[q]) ** 2) <= reach * reach:
-                        todo.append(t)
-        assert len(seen) < edge_fit.MAX_REACH_POINTS  # the walk's cap never cut this one
     out = np.full(len(X), np.inf)
     for p, near in enumerate(reached):
         for _, q in sorted(near)[:edge_fit.FLAG_FITS]:
@@ -390,6 +398,51 @@ def test_nearest_line_distances_equal_a_naive_search(data_dir):
         np.testing.assert_allclose(out, ref, rtol=1e-12)
         reached.append(np.isfinite(out).sum())
     assert reached[0] > 3 * lender.sum() and reached[0] > max(reached[1:]), reached
+
+
+def _naive_confirmed(X, dn, dn_cnt, fit, sure, line, reach, offset, min_cos):
+    """:func:`edge_fit.confirmed_lines` by Python sets: a fit not sure of itself lends where
+    another fit reached through the local mesh within ``reach`` of it has a line within
+    ``offset`` of its point's foot on its own line and as parallel as ``min_cos``."""
+    out = sure.copy()
+    for q in np.flatnonzero(fit & ~sure):
+        u = line[q, 3:]
+        foot = line[q, :3] + np.dot(X[q] - line[q, :3], u) * u
+        for r in _naive_reach(X, dn, dn_cnt, q, reach):
+            if (r != q and fit[r] and abs(np.dot(line[r, 3:], u)) >= min_cos
+                    and np.linalg.norm(np.cross(foot - line[r, :3], line[r, 3:])) <= offset):
+                out[q] = True
+                break
+    return out
+
+
+def test_confirmed_lines_equal_a_naive_search(data_dir):
+    """Which far fits lend, by Python loops, on the noisy Fandisk scan: most fits within two
+    widths of their line are confirmed, fewer by a tighter offset, and none with no second
+    fit to confirm them (every fit sure, or none)."""
+    X, st, cand, dist, ang, line, local, corner = _fitted_scan(data_dir)
+    fit = (dist <= 2.0) & (ang >= edge_fit.SOFT_ANGLE) & ~corner
+    sure = fit & (dist <= 1.0)
+    spacing = float(np.median(local[cand]))
+    far = (fit & ~sure).sum()
+    assert far > 100
+    cos20 = np.cos(np.radians(20.0))
+    counts = []
+    for offset in (0.3 * spacing, 0.05 * spacing):
+        out = np.empty(len(X), dtype=bool)
+        edge_fit.confirmed_lines(X, st.dn, st.dn_cnt, fit, sure, line, 3.0 * spacing, offset,
+                                 cos20, out)
+        ref = _naive_confirmed(X, st.dn, st.dn_cnt, fit, sure, line, 3.0 * spacing, offset,
+                               cos20)
+        np.testing.assert_array_equal(out, ref)
+        assert (out & ~fit).sum() == 0 and (out & sure).sum() == sure.sum()
+        counts.append(int((out & ~sure).sum()))
+    assert far > counts[0] > counts[1] > 0, (far, counts)
+    alone = np.empty(len(X), dtype=bool)
+    for f in (sure, np.zeros(len(X), dtype=bool)):
+        edge_fit.confirmed_lines(X, st.dn, st.dn_cnt, f, f, line, 3.0 * spacing,
+                                 0.3 * spacing, cos20, alone)
+        np.testing.assert_array_equal(alone, f)
 
 
 @pytest.mark.parametrize("part, scan, least, band_below", [

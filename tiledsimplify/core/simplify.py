@@ -235,15 +235,21 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
 def _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend):
     """The flags of :func:`.edge_fit.localise`'s fits: the points within ``width`` cloud
     ``spacing``s of the line of one of their nearest lenders
-    (:func:`.edge_fit.nearest_line_distances`) — the fits within ``width`` of their own line on
-    a sharp edge (a fold of ``SOFT_ANGLE`` or more) or a crease (:func:`.edge_fit.fold_kinds`),
-    not smooth folds nor corners — and the points their own corner fit flags."""
+    (:func:`.edge_fit.nearest_line_distances`) — the fits on a sharp edge (a fold of
+    ``SOFT_ANGLE`` or more) or a crease (:func:`.edge_fit.fold_kinds`), not smooth folds nor
+    corners, within ``width`` of their own line, or within ``FAR_FIT`` widths where another
+    fit's line confirms theirs (:func:`.edge_fit.confirmed_lines`) — and the points their own
+    corner fit flags."""
     smooth, crease = edge_fit.fold_kinds(bend, fitted_angle)
     at_corner = edge_fit.band(fitted, fitted_angle, width) & corner
     if not spacing > 0:
         return at_corner
-    lender = ((fitted <= width) & ~smooth & ~corner
-              & ((fitted_angle >= edge_fit.SOFT_ANGLE) | crease))
+    fit = ((fitted <= edge_fit.FAR_FIT * width) & ~smooth & ~corner
+           & ((fitted_angle >= edge_fit.SOFT_ANGLE) | crease))
+    lender = np.empty(Xu.shape[0], dtype=bool)
+    edge_fit.confirmed_lines(Xu, st.dn, st.dn_cnt, fit, fit & (fitted <= width), line,
+                             edge_fit.CONFIRM_REACH * spacing, edge_fit.CONFIRM_OFFSET * spacing,
+                             math.cos(math.radians(edge_fit.CONFIRM_ANGLE)), lender)
     near = np.empty(Xu.shape[0])
     edge_fit.nearest_line_distances(Xu, st.dn, st.dn_cnt, lender, line,
                                     edge_fit.FLAG_REACH * spacing, spacing, near)
