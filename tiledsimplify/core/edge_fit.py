@@ -72,6 +72,7 @@ import numpy as np
 
 from ._jit import jit, jit_inline, jit_leaf
 from .boundary import deviation_at
+from .cell_grid import sq_dist
 from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covariance,
                      orient_canonical, smallest_axis, solve_small, sym3_eigvals, tangent_basis)
 
@@ -480,19 +481,19 @@ def _edge_line(c1, n1, c2, n2, line):
 
 
 @jit_leaf
-def _squared_distance(X, p, q):
-    """``|X[p] - X[q]|²``."""
-    dx, dy, dz = X[p, 0] - X[q, 0], X[p, 1] - X[q, 1], X[p, 2] - X[q, 2]
-    return dx * dx + dy * dy + dz * dz
+def _point_line_distance(x, line):
+    """Distance from the point ``x`` to the line ``line`` (:func:`_edge_line`):
+    ``|(x - a) × u|``."""
+    vx, vy, vz = x[0] - line[0], x[1] - line[1], x[2] - line[2]
+    ux, uy, uz = line[3], line[4], line[5]
+    cx, cy, cz = vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux
+    return np.sqrt(cx * cx + cy * cy + cz * cz)
 
 
 @jit_leaf
 def _line_distance(X, p, line):
-    """Distance from ``X[p]`` to the line ``line`` (:func:`_edge_line`): ``|(x - a) × u|``."""
-    vx, vy, vz = X[p, 0] - line[0], X[p, 1] - line[1], X[p, 2] - line[2]
-    ux, uy, uz = line[3], line[4], line[5]
-    cx, cy, cz = vy * uz - vz * uy, vz * ux - vx * uz, vx * uy - vy * ux
-    return np.sqrt(cx * cx + cy * cy + cz * cz)
+    """Distance from ``X[p]`` to the line ``line``."""
+    return _point_line_distance(X[p], line)
 
 
 @jit
@@ -785,9 +786,10 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     ``corner[p]``: whether that line is a corner's (:func:`_fit_corner`), ``bend[p]``: the
     squared error of one quadric height field over the two-ring over that of the two planes
     (:func:`_quadric_sse`, :func:`_two_plane_sse`; NaN where no two-plane fit found an edge
-    within ``width`` local spacings — a farther line's bend is not measured, as :func:`borrow`
-    and :func:`line_distances` take only lines within ``width`` and a farther soft fit lends no
-    flags (:func:`confirmed_lines` takes sharp ones), and so where a corner's line replaced it
+    within ``width`` local spacings — a farther line's bend is not measured: :func:`borrow`
+    and :func:`line_distances` take only lines within ``width``, a farther soft fit lends no
+    flags and a farther sharp one lends unclassified (:func:`confirmed_lines`), and so where a
+    corner's line replaced it
     — ``inf`` where the planes fit exactly and the quadric does not; at least ``SHARP_RATIO``
     where the quadric's squared error exceeds the planes' by ``CREASE_EXCESS`` squared local
     spacings a point): below ``SMOOTH_RATIO`` a smooth fold, at or above ``SHARP_RATIO`` a
@@ -837,7 +839,10 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
             continue
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
                                     line[p], max_cos)
-        if d <= width * s:  # a farther soft line lends nothing: its bend matters nowhere
+        # a farther line's bend is not measured: measured, far smooth folds stopped lending
+        # and far soft ones became creases, F1 mixed (docs/measurements.md "Creases by the
+        # quadric's excess error")
+        if d <= width * s:
             sse2 = _two_plane_sse(X, idx, c, side, c1, n1, c2, n2)
             sq = _quadric_sse(X, idx, c, s, c1, n1, c2, work, M6, r6)
             bend[p] = sq / sse2 if sse2 > 0.0 else (np.inf if sq > 0.0 else np.nan)
@@ -927,7 +932,7 @@ def _reach(X, dn, dn_cnt, q, r2, mark, ring):
             if mark[s] == q + 1 or c >= MAX_REACH_POINTS:
                 continue
             mark[s] = q + 1
-            if _squared_distance(X, s, q) <= r2:
+            if sq_dist(X, s, X[q]) <= r2:
                 ring[c] = s
                 c += 1
     return c
@@ -969,10 +974,10 @@ def nearest_line_distances(X, dn, dn_cnt, lender, line, reach, spacing, out):
             continue
         for i in range(_reach(X, dn, dn_cnt, q, r2, mark, ring)):
             r = ring[i]
-            d2 = _squared_distance(X, r, q)
+            d2 = sq_dist(X, r, X[q])
             # q's place among r's k nearest lenders (after any as near: lower index first)
             j = k
-            while j > 0 and (best[r, j - 1] < 0 or d2 < _squared_distance(X, r, best[r, j - 1])):
+            while j > 0 and (best[r, j - 1] < 0 or d2 < sq_dist(X, r, X[best[r, j - 1]])):
                 j -= 1
             if j < k:
                 for t in range(k - 1, j, -1):
@@ -1025,14 +1030,9 @@ def confirmed_lines(X, dn, dn_cnt, fit, sure, line, reach, offset, min_cos, out)
         foot[0], foot[1], foot[2] = line[q, 0] + t * ux, line[q, 1] + t * uy, line[q, 2] + t * uz
         for i in range(_reach(X, dn, dn_cnt, q, r2, mark, ring)):
             r = ring[i]
-            if r == q or not fit[r]:
-                continue
-            vx, vy, vz = line[r, 3], line[r, 4], line[r, 5]
-            if abs(ux * vx + uy * vy + uz * vz) < min_cos:
-                continue
-            wx, wy, wz = foot[0] - line[r, 0], foot[1] - line[r, 1], foot[2] - line[r, 2]
-            cx, cy, cz = wy * vz - wz * vy, wz * vx - wx * vz, wx * vy - wy * vx
-            if cx * cx + cy * cy + cz * cz <= offset * offset:
+            if (r != q and fit[r]
+                    and abs(ux * line[r, 3] + uy * line[r, 4] + uz * line[r, 5]) >= min_cos
+                    and _point_line_distance(foot, line[r]) <= offset):
                 out[q] = True
                 break
 

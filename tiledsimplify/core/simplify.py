@@ -226,22 +226,22 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
                       bend)
     spacing = float(median_spacing(Xu) if spacing is None else spacing)
     distance = np.empty(m) if distance_out is None else distance_out
+    own = edge_fit.band(fitted, fitted_angle, width)  # the candidates their own fit flags
     band, features = _features_of_fits(Xu, st, fitted, fitted_angle, line, local, width,
-                                       spacing, corner, distance)
+                                       spacing, corner, distance, own)
     return deviation, band, features, _flags(Xu, st, fitted, fitted_angle, line, width, spacing,
-                                             corner, bend), threshold
+                                             corner, bend, own & corner), threshold
 
 
-def _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend):
+def _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend, at_corner):
     """The flags of :func:`.edge_fit.localise`'s fits: the points within ``width`` cloud
     ``spacing``s of the line of one of their nearest lenders
     (:func:`.edge_fit.nearest_line_distances`) — the fits on a sharp edge (a fold of
     ``SOFT_ANGLE`` or more) or a crease (:func:`.edge_fit.fold_kinds`), not smooth folds nor
     corners, within ``width`` of their own line, or within ``FAR_FIT`` widths where another
     fit's line confirms theirs (:func:`.edge_fit.confirmed_lines`) — and the points their own
-    corner fit flags."""
+    corner fit flags (``at_corner``)."""
     smooth, crease = edge_fit.fold_kinds(bend, fitted_angle)
-    at_corner = edge_fit.band(fitted, fitted_angle, width) & corner
     if not spacing > 0:
         return at_corner
     fit = ((fitted <= edge_fit.FAR_FIT * width) & ~smooth & ~corner
@@ -257,7 +257,7 @@ def _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend):
 
 
 def _features_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing, corner,
-                      distance):
+                      distance, own):
     """``(core band, features)`` of the fitted lines (:func:`.edge_fit.localise`'s outputs).
 
     The core band: the candidates within ``width`` local spacings of a fitted line — their own
@@ -265,11 +265,11 @@ def _features_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing,
     (:func:`.edge_fit.borrow`; each point's distance to it into ``distance``) — less beside a
     soft edge (:func:`.edge_fit.band`). The features add the points their own corner fit flags
     and every point within ``width`` spacings of a sharp fitted line near it
-    (:func:`.edge_fit.line_distances`).
+    (:func:`.edge_fit.line_distances`). ``own``: the candidates their own fit flags
+    (:func:`.edge_fit.band` of ``fitted``).
     """
     m = Xu.shape[0]
     angle = np.empty(m)
-    own = edge_fit.band(fitted, fitted_angle, width)
     edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width, own, corner,
                     distance, angle)
     # points their own corner fit flags are features, not the core band: the band is sure of
