@@ -75,15 +75,17 @@ RENAMED = {"voxel grid (numpy, nearest to centroid)": "voxel grid (numpy: neares
 QUICK = ("bunny", "fandisk", "fandisk-scan0.1")
 
 
-def case_names():
-    names = ["bunny", "fandisk"] + [f"fandisk-scan{s}" for s in NOISES]
+def case_names(noises=NOISES):
+    """Every case: the Bunny, each CAD part sampled evenly and scanned at each of ``noises``
+    (times the spacing), the Autzen tile and the Bunny's range scans."""
+    names = ["bunny", "fandisk"] + [f"fandisk-scan{s}" for s in noises]
     for part in PARTS:
-        names += [part] + [f"{part}-scan{s}" for s in NOISES]
+        names += [part] + [f"{part}-scan{s}" for s in noises]
     return names + ["autzen", "bunny-range"]
 
 
-def _groups():
-    names = case_names()
+def _groups(noises=NOISES):
+    names = case_names(noises)
     return {
         "all": names,
         "cad": ["fandisk", *PARTS],
@@ -369,6 +371,10 @@ def main(argv=None):
                    help="comma-separated modes of ours to run (default: every mode)")
     p.add_argument("--cad-points", type=int, default=20_000,
                    help="points of the evenly sampled / scanned CAD parts (default 20000)")
+    p.add_argument("--noises", default=None, metavar="N1,N2",
+                   help="scanner noise levels of the CAD scan cases, in spacings (default "
+                        + ",".join(map(str, NOISES)) + "), e.g. 0.05,0.3 to hold the tuned "
+                        "levels out")
     p.add_argument("--lidar-points", type=int, default=None,
                    help="crop the LiDAR file to this many points around its centre")
     p.add_argument("--ratio", type=float, default=None,
@@ -387,19 +393,27 @@ def main(argv=None):
         print("### Summary: ours against the best peer at the same count\n")
         print(summary(results))
         return 0
+    noises = NOISES
+    if args.noises:
+        try:
+            noises = tuple(float(v) for v in args.noises.split(","))
+        except ValueError:
+            p.error(f"--noises takes comma-separated numbers, got {args.noises!r}")
+        if not all(0 <= v < 10 for v in noises):
+            p.error(f"--noises must be in [0, 10) spacings, got {args.noises!r}")
     if args.list:
-        print("\n".join(case_names()))
-        print("groups:", ", ".join(_groups()))
+        print("\n".join(case_names(noises)))
+        print("groups:", ", ".join(_groups(noises)))
         return 0
     spec = "quick" if args.quick or not args.cases else args.cases
-    groups = _groups()
+    groups = _groups(noises)
     names = []
     for item in spec.split(","):
         item = item.strip()
         for name in groups.get(item, [item]):
             if name not in names:
                 names.append(name)
-    unknown = [n for n in names if n not in case_names()]
+    unknown = [n for n in names if n not in case_names(noises)]
     if unknown:
         p.error(f"unknown case(s) {unknown}; --list shows the cases")
     only = set(args.only.split(",")) if args.only else None
