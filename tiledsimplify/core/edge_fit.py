@@ -25,6 +25,9 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    when it lies within ``width`` local spacings of that line (local spacing: the median
    nearest-neighbour distance over the two-ring) — ``SOFT_WIDTH`` of that where the faces
    fold by less than ``SOFT_ANGLE`` (:func:`band`).
+   **Thin walls** (since 2026-12-06): where the two-ring's heights over its mean plane fall
+   into two parallel sheets 0.5-3 local spacings apart — a wall thinner than the two-ring, whose
+   two faces the local mesh joins — only the point's own sheet is fitted (:func:`own_layer`).
    **Corners** (since 2026-12-05): where that fit flags no point (no edge within ``width``,
    or a farther one) but flags one in its two-ring, the two-ring is split into three planes
    (:func:`_fit_corner`) — where an edge bends (a polygonal hole's rim), where three faces
@@ -185,6 +188,86 @@ CONFIRM_REACH = 3.0
 CONFIRM_OFFSET = 0.3
 #: ... and runs within this angle (degrees) of it
 CONFIRM_ANGLE = 20.0
+#: a two-ring whose heights over its mean plane fall into two layers at least this many local
+#: spacings apart (:func:`own_layer`) ...
+LAYER_GAP_MIN = 0.5
+#: ... and at most this many (farther layers are two surfaces the local mesh rarely joins) ...
+LAYER_GAP_MAX = 3.0
+#: ... each layer's RMS height about its mean at most this fraction of the gap, is two sheets —
+#: a thin wall's faces, the faces two scan views saw of it — and the fit takes the point's own
+#: (measured on the 36 CAD quality cases, docs/measurements.md "Thin walls: each sheet fitted
+#: alone": 0.25 against 0.3, whose layers are also the two faces of some edges)
+LAYER_RMS = 0.25
+
+
+@jit
+def own_layer(X, idx, c, spacing, h, normal, work):
+    """The points of ``idx[:c]`` in ``idx[0]``'s own layer, where they lie in two: compacts
+    ``idx`` (``idx[0]`` stays first) and returns the new count; ``c`` where they do not.
+
+    Beyond the paper. Where a wall is thinner than about two spacings — a sheet, the tray's 3.18
+    mm plate sampled at 2.63 mm, the faces of a scanned plate that two views saw — the local
+    mesh joins both faces, and a two-plane fit sees two parallel planes (no edge: 648 of the
+    tray's 920 missed edge points) or a wedge across them (false edges along the lines where
+    the views' scan lines cross). The heights ``h[j]`` of the points over their mean plane (the
+    PCA plane of ``idx[:c]``, its normal into ``normal``) are split in two by a 1-D 2-means;
+    two layers are two sheets where their means lie ``LAYER_GAP_MIN``-``LAYER_GAP_MAX`` local
+    ``spacing``s apart, each holds ``MIN_SIDE`` points or more, and each one's RMS height about
+    its mean is at most ``LAYER_RMS`` of the gap (one face split by height — curved, or the two
+    faces of an edge — spreads over the gap). ``h``: work array of length ``c`` or more;
+    ``work``: length 3.
+    """
+    p = idx[0]
+    smallest_axis(*covariance_about(X, p, idx[1:], c - 1), normal, work)
+    lo = np.inf
+    hi = -np.inf
+    for j in range(c):
+        q = idx[j]
+        h[j] = ((X[q, 0] - X[p, 0]) * normal[0] + (X[q, 1] - X[p, 1]) * normal[1]
+                + (X[q, 2] - X[p, 2]) * normal[2])
+        lo = min(lo, h[j])
+        hi = max(hi, h[j])
+    if hi - lo < LAYER_GAP_MIN * spacing:
+        return c
+    cut = 0.5 * (lo + hi)
+    m0 = m1 = 0.0
+    k0 = k1 = 0
+    for _ in range(8):  # Lloyd's rounds in 1-D: the cut halfway between the layers' means
+        m0 = m1 = 0.0
+        k0 = k1 = 0
+        for j in range(c):
+            if h[j] > cut:
+                m1 += h[j]
+                k1 += 1
+            else:
+                m0 += h[j]
+                k0 += 1
+        if k0 < MIN_SIDE or k1 < MIN_SIDE:
+            return c
+        m0 /= k0
+        m1 /= k1
+        if 0.5 * (m0 + m1) == cut:
+            break
+        cut = 0.5 * (m0 + m1)
+    gap = m1 - m0
+    if gap < LAYER_GAP_MIN * spacing or gap > LAYER_GAP_MAX * spacing:
+        return c
+    v0 = v1 = 0.0
+    for j in range(c):
+        if h[j] > cut:
+            v1 += (h[j] - m1) ** 2
+        else:
+            v0 += (h[j] - m0) ** 2
+    limit = (LAYER_RMS * gap) ** 2
+    if v0 > limit * k0 or v1 > limit * k1:
+        return c
+    upper = h[0] > cut
+    m = 0
+    for j in range(c):
+        if (h[j] > cut) == upper:
+            idx[m] = idx[j]
+            m += 1
+    return m
 
 
 @jit_leaf
@@ -801,6 +884,9 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     Local spacing: the median over ``p`` and its two-ring of ``nn`` (each point's distance to
     its nearest neighbour, :func:`nearest_distances`).
 
+    Where the two-ring holds two parallel sheets (a thin wall's faces, :func:`own_layer`), the
+    fit takes the point's own sheet alone (its local spacing still over the whole two-ring).
+
     Beyond the paper, a second pass: a candidate whose two-plane fit finds no edge within
     ``width`` local spacings of it (none, or a farther one) is fitted with three planes
     (:func:`_fit_corner`); a nearer line found so replaces its own only where its two-ring
@@ -837,6 +923,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         local[p] = s
         if s <= 0.0:
             continue
+        c = own_layer(X, idx, c, s, proj, c1, work)  # a thin wall: the point's own sheet
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
                                     line[p], max_cos)
         # a farther line's bend is not measured: measured, far smooth folds stopped lending
