@@ -702,7 +702,8 @@ def test_a_fillet_is_a_smooth_fold_and_an_edge_is_not():
         E += noise * h * rng.normal(size=E.shape)
         E, _, _, dist, ang, _, _, _, _, bend = _steps_1_2(E - E.mean(0))
         flagged = (dist <= 1.0) & (np.abs(E[:, 1]) < 0.8)
-        assert flagged.sum() > 40
+        assert flagged.sum() > 30  # enough fits to judge (47 and 40 found; 48 and 43 before
+        # thin walls were fitted a sheet at a time, 2026-12-06)
         smooth_fit, crease = edge_fit.fold_kinds(bend, ang)
         assert smooth_fit[flagged].mean() < 0.03
         assert not crease.any()  # a 90° fold is sharp, not soft
