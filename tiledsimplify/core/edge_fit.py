@@ -213,8 +213,11 @@ def own_layer(X, idx, c, spacing, h, normal, work):
     PCA plane of ``idx[:c]``, its normal into ``normal``) are split in two by a 1-D 2-means;
     two layers are two sheets where their means lie ``LAYER_GAP_MIN``-``LAYER_GAP_MAX`` local
     ``spacing``s apart, each holds ``MIN_SIDE`` points or more, and each one's RMS height about
-    its mean is at most ``LAYER_RMS`` of the gap (one face split by height — curved, or the two
-    faces of an edge — spreads over the gap). ``h``: work array of length ``c`` or more;
+    its mean is at most ``LAYER_RMS`` of the gap: one face split by height — curved, or the two
+    faces of an edge — mostly spreads over the gap. Not always: some two-rings at edges pass
+    (a sharp 90° roof of random points, noise 0.1: 40 fits within a spacing, 43 without this),
+    and part of idler_riser's and plate_holes' gains came from such splits (docs/measurements.md
+    "Thin walls: each sheet fitted alone"). ``h``: work array of length ``c`` or more;
     ``work``: length 3.
     """
     p = idx[0]
