@@ -19,15 +19,23 @@ def _roof(rng, n, angle_deg=90.0, noise=0.0):
     return X + noise * rng.normal(size=X.shape)
 
 
+def _localise(X, st, candidate, min_angle=edge_fit.MIN_ANGLE, width=1.0):
+    """``edge_fit.localise`` of the ``candidate`` points of centred ``X`` (neighbourhoods
+    ``st``): ``(nn, dist, angle, line, local, corner, bend)``."""
+    n = len(X)
+    nn = np.empty(n)
+    edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
+    dist, angle, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
+    corner, bend = np.empty(n, bool), np.empty(n)
+    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, candidate, dist, angle, line, local,
+                      min_angle, width, corner, bend)
+    return nn, dist, angle, line, local, corner, bend
+
+
 def _localise_all(X, min_angle=edge_fit.MIN_ANGLE):
     X = X - X.mean(0)
-    st = neighbourhoods(X, scale_of(X))
-    nn = np.empty(len(X))
-    edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
-    n = len(X)
-    out, angle, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
-    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, np.ones(n, bool), out, angle, line,
-                      local, min_angle, 1.0, np.empty(n, bool), np.empty(n))
+    nn, out, angle, *_ = _localise(X, neighbourhoods(X, scale_of(X)), np.ones(len(X), bool),
+                                   min_angle)
     return out, nn, angle
 
 
@@ -286,14 +294,10 @@ def _steps_1_2(X, width=1.0):
     corner, nn, bend)``."""
     st = neighbourhoods(X, scale_of(X))
     n = len(X)
-    dev, smooth, nn = np.empty(n), np.empty((n, 3)), np.empty(n)
+    dev, smooth = np.empty(n), np.empty((n, 3))
     edge_fit.smoothed_deviations(X, st.dn, st.dn_cnt, smooth, dev)
-    edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
     cand = dev > edge_fit.CANDIDATE
-    dist, ang, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
-    corner, bend = np.empty(n, bool), np.empty(n)
-    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, cand, dist, ang, line, local,
-                      edge_fit.MIN_ANGLE, width, corner, bend)
+    nn, dist, ang, line, local, corner, bend = _localise(X, st, cand, width=width)
     return X, st, cand, dist, ang, line, local, corner, nn, bend
 
 
@@ -719,14 +723,8 @@ def test_a_noisy_soft_fold_is_still_a_crease():
     X = _roof(rng, 6000, angle_deg=130.0)
     X = X + 0.1 * (2 / np.sqrt(6000)) * rng.normal(size=X.shape)
     X = X - X.mean(0)
-    st = neighbourhoods(X, scale_of(X))
-    n = len(X)
-    nn = np.empty(n)
-    edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
-    out, angle, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
-    corner, bend = np.empty(n, bool), np.empty(n)
-    edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, np.ones(n, bool), out, angle, line,
-                      local, edge_fit.MIN_ANGLE, 1.0, corner, bend)
+    _, out, angle, _, _, corner, bend = _localise(X, neighbourhoods(X, scale_of(X)),
+                                                  np.ones(len(X), bool))
     near = (out <= 1.0) & (np.abs(X[:, 1]) < 0.8) & ~corner
     assert near.sum() > 30
     assert abs(np.median(angle[near]) - 50.0) < 3.0

@@ -207,8 +207,8 @@ def own_layer(X, idx, c, spacing, h, normal, work):
 
     Beyond the paper. Where a wall is thinner than about two spacings — a sheet, the tray's 3.18
     mm plate sampled at 2.63 mm, the faces of a scanned plate that two views saw — the local
-    mesh joins both faces, and a two-plane fit sees two parallel planes (no edge: 648 of the
-    tray's 920 missed edge points) or a wedge across them (false edges along the lines where
+    mesh joins both faces, and a two-plane fit sees two parallel planes (no edge: 612 of the
+    813 candidates among the tray's 920 missed edge points) or a wedge across them (false edges along the lines where
     the views' scan lines cross). The heights ``h[j]`` of the points over their mean plane (the
     PCA plane of ``idx[:c]``, its normal into ``normal``) are split in two by a 1-D 2-means;
     two layers are two sheets where their means lie ``LAYER_GAP_MIN``-``LAYER_GAP_MAX`` local
