@@ -28,6 +28,11 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    **Thin walls** (since 2026-12-06): where the two-ring's heights over its mean plane fall
    into two parallel sheets 0.5-3 local spacings apart — a wall thinner than the two-ring, whose
    two faces the local mesh joins — only the point's own sheet is fitted (:func:`own_layer`).
+   **Wide two-rings** (since 2026-12-06, stop 57): where neither seed gives an edge, the fit
+   is tried once more over the two-ring's points within ``NEAR_RING`` local spacings
+   (:func:`near_part`) — a line scan's two-ring reaches some eight local spacings across its
+   lines, past a narrow face or over a curved one; such a fit stands only where another fit's
+   line confirms it (:func:`.simplify.boundary_flags`).
    **Corners** (since 2026-12-05): where that fit flags no point (no edge within ``width``,
    or a farther one) but flags one in its two-ring, the two-ring is split into three planes
    (:func:`_fit_corner`) — where an edge bends (a polygonal hole's rim), where three faces
@@ -198,6 +203,37 @@ LAYER_GAP_MAX = 3.0
 #: (measured on the 36 CAD quality cases, docs/measurements.md "Thin walls: each sheet fitted
 #: alone": 0.25 against 0.3, whose layers are also the two faces of some edges)
 LAYER_RMS = 0.25
+#: a two-plane fit that finds no edge is tried once more over the two-ring's points within this
+#: many local spacings of the point (:func:`near_part`; measured on the 36 CAD quality cases,
+#: docs/measurements.md "Scans: the near part of the two-ring": 4, 5 and 6)
+NEAR_RING = 5.0
+
+
+@jit_leaf
+def near_part(X, idx, c, radius):
+    """The points of ``idx[:c]`` within ``radius`` of ``X[idx[0]]``: compacts ``idx``
+    (``idx[0]`` stays first) and returns their count.
+
+    Beyond the paper. On a line scan the local spacing is the spacing along a line, and the
+    lines lie about four of them apart (:func:`.synthetic.scan`'s ``line_spacing_ratio``), so
+    a two-ring reaches some eight local spacings across the lines — past a narrow face to the
+    next one, or over a curved face that is no plane that far out. Its two-plane fit then
+    fails (sides interleaved, planes near parallel) on edges a two-ring half as wide fits:
+    374 of the 482 missed edge points of octagonal_pocket's noise-0.1 scan (edges seen from
+    both sides) had no fit, and 99 of them fit a sharp edge within a spacing over the points
+    within 6 spacings (61 within 4). On an even sampling the two-ring lies within that
+    radius.
+    """
+    p = idx[0]
+    r2 = radius * radius
+    m = 0
+    for j in range(c):
+        q = idx[j]
+        dx, dy, dz = X[q, 0] - X[p, 0], X[q, 1] - X[p, 1], X[q, 2] - X[p, 2]
+        if dx * dx + dy * dy + dz * dz <= r2:
+            idx[m] = q
+            m += 1
+    return m
 
 
 @jit
@@ -863,7 +899,7 @@ def _two_plane_sse(X, idx, c, side, c1, n1, c2, n2):
 
 @jit
 def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min_angle, width,
-             corner, bend):
+             corner, bend, narrowed):
     """Step 2 for every candidate: ``out[p]`` = edge distance / local spacing (inf: no edge),
     ``angle[p]`` = the fold of the fitted faces (degrees, 0-180, see ``MIN_ANGLE``; 0 where no
     edge),
@@ -889,6 +925,10 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
 
     Where the two-ring holds two parallel sheets (a thin wall's faces, :func:`own_layer`), the
     fit takes the point's own sheet alone (its local spacing still over the whole two-ring).
+    Where the fit finds no edge, it is tried once more over the two-ring's points within
+    ``NEAR_RING`` local spacings (:func:`near_part`, then :func:`own_layer` of those);
+    ``narrowed[p]``: whether ``p``'s fit is that second one, which
+    :func:`.simplify.boundary_flags` keeps only where another fit confirms its line.
 
     Beyond the paper, a second pass: a candidate whose two-plane fit finds no edge within
     ``width`` local spacings of it (none, or a farther one) is fitted with three planes
@@ -912,6 +952,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     r6 = np.empty(6)
     for p in range(n):
         bend[p] = np.nan
+        narrowed[p] = False
         out[p] = np.inf
         angle[p] = 0.0
         local[p] = 0.0
@@ -929,6 +970,13 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         c = own_layer(X, idx, c, s, proj, c1, work)  # a thin wall: the point's own sheet
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
                                     line[p], max_cos)
+        if d == np.inf:  # a scan's two-ring reaching too far across its lines: the near part
+            m = near_part(X, idx, c, NEAR_RING * s)
+            if MIN_SIDE * 2 <= m < c:
+                c = own_layer(X, idx, m, s, proj, c1, work)
+                d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s,
+                                            proj, line[p], max_cos)
+                narrowed[p] = d < np.inf
         # a farther line's bend is not measured: measured, far smooth folds stopped lending
         # and far soft ones became creases, F1 mixed (docs/measurements.md "Creases by the
         # quadric's excess error")
