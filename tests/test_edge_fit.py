@@ -906,3 +906,42 @@ def test_a_scanned_step_is_fitted_on_the_near_part_of_its_two_ring():
         total += len(near)
         assert not (out[inner & (d > 3.0)] <= 1.0).any()
     assert found / total > 0.75 and found - whole > 0.2 * total
+
+
+def _jittered_grid(rng, n_side, pitch):
+    """Points on a jittered square grid of ``n_side`` x ``n_side`` cells in the xy-plane,
+    centred on the origin (an even sampling with no scan lines)."""
+    g = (np.arange(n_side) - n_side / 2 + 0.5) * pitch
+    xy = np.array([(x, y) for x in g for y in g])
+    return xy + (rng.random(xy.shape) - 0.5) * 0.6 * pitch
+
+
+@pytest.mark.parametrize("height", [0.5, 0.7, 1.0])
+def test_a_step_lower_than_the_spacing_is_an_edge(height):
+    """A face stepping up by less than a spacing along x = 0 (a rib on counter's underside is
+    0.67 spacings tall): its wall holds no points and its two-rings' PCA planes tilt across
+    it, so no two-plane fit finds it; the step fit does (the points within a spacing of the
+    step, at mid height, within a spacing of a line), and no point of a flat face farther
+    than 3 spacings from it. Two sheets this far apart lying one over the other (a thin wall)
+    are no step: of their 2,454 inner points 7 fit a step at 0.5 pitches (where the
+    jittered sheets lie side by side), none at 0.7 or 1.0 (one other fit at 0.7)."""
+    rng = np.random.default_rng(7)
+    pitch = 0.02
+    xy = _jittered_grid(rng, 50, pitch)
+    X = np.c_[xy, np.where(xy[:, 0] > 0, height * pitch, 0.0)]
+    X = X - X.mean(0)
+    nn, out, angle, _, _, _, _, narrowed = _localise(X, neighbourhoods(X, scale_of(X)),
+                                                     np.ones(len(X), bool))
+    s = np.median(nn)
+    x = X[:, 0] - X[:, 0].min() - 25 * pitch  # the step at x = 0
+    inner = np.abs(X[:, 1]) < 0.35
+    near = inner & (np.abs(x) <= 0.5 * s)
+    assert (out[near] <= 1.0).mean() > 0.8
+    assert (narrowed[near] & (angle[near] == 90.0)).mean() > 0.5
+    assert not (out[inner & (np.abs(x) > 3 * s)] <= 1.0).any()
+    # two sheets this far apart, one over the other: a thin wall, no step
+    top = _jittered_grid(rng, 50, pitch)
+    Y = np.r_[np.c_[xy, np.zeros(len(xy))], np.c_[top, np.full(len(top), height * pitch)]]
+    Y = Y - Y.mean(0)
+    _, out_y, _, *_ = _localise(Y, neighbourhoods(Y, scale_of(Y)), np.ones(len(Y), bool))
+    assert (out_y[(np.abs(Y[:, :2]) < 0.35).all(axis=1)] <= 1.0).sum() <= 10

@@ -33,6 +33,9 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    (:func:`near_part`) — a line scan's two-ring reaches some eight local spacings across its
    lines, past a narrow face or over a curved one; such a fit stands only where another fit's
    line confirms it (:func:`.simplify.boundary_flags`).
+   **Steps** (since 2026-12-06, stop 57): where no two-plane fit gives an edge, a step lower
+   than the spacing — two parallel layers side by side, its wall holding few points or none
+   (counter's rib, 0.67 spacings tall) — is fitted (:func:`_fit_step`), confirmed likewise.
    **Corners** (since 2026-12-05): where that fit flags no point (no edge within ``width``,
    or a farther one) but flags one in its two-ring, the two-ring is split into three planes
    (:func:`_fit_corner`) — where an edge bends (a polygonal hole's rim), where three faces
@@ -207,6 +210,22 @@ LAYER_RMS = 0.25
 #: many local spacings of the point (:func:`near_part`; measured on the 36 CAD quality cases,
 #: docs/measurements.md "Scans: the near part of the two-ring": 4, 5 and 6)
 NEAR_RING = 5.0
+#: a candidate that no two-plane fit gives an edge is tried as a step (:func:`_fit_step`) over
+#: its two-ring's points within this many local spacings ...
+STEP_RING = 2.5
+#: ... two parallel layers, their heights' means this many local spacings apart at least ...
+STEP_GAP_MIN = 0.45
+#: ... and at most (a taller step has a wall the two-plane fits see) ...
+STEP_GAP_MAX = 1.5
+#: ... each layer's RMS height about its mean at most this fraction of the gap ...
+STEP_RMS = 0.25
+#: ... each layer's own plane within this cosine of the other's and of the heights' normal ...
+STEP_PARALLEL = 0.99
+#: ... and the layers side by side: at most this share of the points on the wrong side of the
+#: best line between them in the layers' plane (a thin wall's faces overlap; measured on
+#: counter's rib and the 36 CAD quality cases, docs/measurements.md "Steps lower than a
+#: spacing")
+STEP_MIXED = 0.1
 
 
 @jit_leaf
@@ -234,6 +253,165 @@ def near_part(X, idx, c, radius):
             idx[m] = q
             m += 1
     return m
+
+
+@jit
+def _two_means(h, c):
+    """A 1-D 2-means of ``h[:c]`` (Lloyd's rounds from the midrange, at most 8):
+    ``(ok, cut, m0, m1, k0, k1, v0, v1)`` — the cut, each layer's mean, count and sum of
+    squared deviations from its mean (``h > cut``: layer 1); ``ok`` False where a layer
+    holds fewer than ``MIN_SIDE`` points."""
+    lo = np.inf
+    hi = -np.inf
+    for j in range(c):
+        lo = min(lo, h[j])
+        hi = max(hi, h[j])
+    cut = 0.5 * (lo + hi)
+    m0 = m1 = 0.0
+    k0 = k1 = 0
+    for _ in range(8):  # Lloyd's rounds in 1-D: the cut halfway between the layers' means
+        m0 = m1 = 0.0
+        k0 = k1 = 0
+        for j in range(c):
+            if h[j] > cut:
+                m1 += h[j]
+                k1 += 1
+            else:
+                m0 += h[j]
+                k0 += 1
+        if k0 < MIN_SIDE or k1 < MIN_SIDE:
+            return False, cut, 0.0, 0.0, k0, k1, 0.0, 0.0
+        m0 /= k0
+        m1 /= k1
+        if 0.5 * (m0 + m1) == cut:
+            break
+        cut = 0.5 * (m0 + m1)
+    v0 = v1 = 0.0
+    for j in range(c):
+        if h[j] > cut:
+            v1 += (h[j] - m1) ** 2
+        else:
+            v0 += (h[j] - m0) ** 2
+    return True, cut, m0, m1, k0, k1, v0, v1
+
+
+@jit
+def _fit_step(X, normals, idx, c, spacing, h, a, line, t1, t2, work):
+    """A step lower than the spacing at ``idx[0]``: ``distance`` from it to the step's edge
+    (``inf`` where ``idx[:c]`` is no step), the edge into ``line`` (:func:`_edge_line`'s form).
+
+    Beyond the paper. A face that steps up by less than a spacing — counter's rib, 1.5 mm tall
+    at a 2.25 mm spacing — has a wall with few or no points, so no two-plane fit finds its
+    edges, and the two-ring's PCA plane tilts across the step, mixing the levels' heights.
+    Here the heights are taken along each point's one-ring normal in turn (``normals``) and
+    split by a 1-D 2-means (:func:`_two_means`); the normal whose two layers lie
+    ``STEP_GAP_MIN``-``STEP_GAP_MAX`` local ``spacing``s apart with the least RMS height
+    about their means (at most ``STEP_RMS`` of the gap) is the step's. Both layers' own
+    planes must be parallel to it and to each other (``STEP_PARALLEL``: a curved face split
+    by height is not), and the layers must lie side by side in that plane: a line
+    separates them with at most ``STEP_MIXED`` of the points on its wrong side (a thin wall's
+    two faces lie one over the other). The edge runs along that line at the layers' mid
+    height, across ``u``, the direction from the lower layer's centre to the upper's; both of
+    the step's edges lie within half its height of it. ``h``, ``a``: work arrays of length
+    ``c`` or more; ``t1``, ``t2``, ``work``: length 3.
+    """
+    p = idx[0]
+    if c < 2 * MIN_SIDE + 1:
+        return np.inf
+    best = np.inf
+    bq = -1
+    for jq in range(c):
+        q = idx[jq]
+        for j in range(c):
+            r = idx[j]
+            h[j] = ((X[r, 0] - X[p, 0]) * normals[q, 0] + (X[r, 1] - X[p, 1]) * normals[q, 1]
+                    + (X[r, 2] - X[p, 2]) * normals[q, 2])
+        ok, cut, m0, m1, k0, k1, v0, v1 = _two_means(h, c)
+        if not ok:
+            continue
+        gap = m1 - m0
+        if gap < STEP_GAP_MIN * spacing or gap > STEP_GAP_MAX * spacing:
+            continue
+        score = max(v0 / k0, v1 / k1) / (gap * gap)
+        if score < best:
+            best = score
+            bq = q
+    if bq < 0 or best > STEP_RMS * STEP_RMS:
+        return np.inf
+    nx, ny, nz = normals[bq, 0], normals[bq, 1], normals[bq, 2]
+    for j in range(c):
+        r = idx[j]
+        h[j] = (X[r, 0] - X[p, 0]) * nx + (X[r, 1] - X[p, 1]) * ny + (X[r, 2] - X[p, 2]) * nz
+    ok, cut, m0, m1, k0, k1, v0, v1 = _two_means(h, c)
+    # each layer's own plane parallel to the other's and to the heights' normal
+    n0 = np.empty(3)
+    n1 = np.empty(3)
+    sub = np.empty(c, dtype=np.int64)
+    for which in range(2):
+        k = 0
+        for j in range(c):
+            if (h[j] > cut) == (which == 1):
+                sub[k] = idx[j]
+                k += 1
+        out = n0 if which == 0 else n1
+        smallest_axis(*covariance_about(X, sub[0], sub[1:k], k - 1), out, work)
+        if abs(out[0] * nx + out[1] * ny + out[2] * nz) < STEP_PARALLEL:
+            return np.inf
+    if abs(n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2]) < STEP_PARALLEL:
+        return np.inf
+    # side by side: the best cut along the direction between the layers' centres
+    work[0], work[1], work[2] = nx, ny, nz
+    tangent_basis(work, t1, t2)
+    u1 = u2 = 0.0
+    for j in range(c):
+        r = idx[j]
+        x1 = (X[r, 0] - X[p, 0]) * t1[0] + (X[r, 1] - X[p, 1]) * t1[1] + (X[r, 2] - X[p, 2]) * t1[2]
+        x2 = (X[r, 0] - X[p, 0]) * t2[0] + (X[r, 1] - X[p, 1]) * t2[1] + (X[r, 2] - X[p, 2]) * t2[2]
+        if h[j] > cut:
+            u1 += x1 / k1
+            u2 += x2 / k1
+        else:
+            u1 -= x1 / k0
+            u2 -= x2 / k0
+    un = np.sqrt(u1 * u1 + u2 * u2)
+    if not un > 0.0:
+        return np.inf
+    u1 /= un
+    u2 /= un
+    for j in range(c):
+        r = idx[j]
+        a[j] = (((X[r, 0] - X[p, 0]) * t1[0] + (X[r, 1] - X[p, 1]) * t1[1]
+                 + (X[r, 2] - X[p, 2]) * t1[2]) * u1
+                + ((X[r, 0] - X[p, 0]) * t2[0] + (X[r, 1] - X[p, 1]) * t2[1]
+                   + (X[r, 2] - X[p, 2]) * t2[2]) * u2)
+    order = np.argsort(a[:c])
+    wrong = k0  # cut before the first point: every lower point on the upper side
+    least = wrong
+    at = 0
+    for i in range(c):
+        if h[order[i]] > cut:
+            wrong += 1
+        else:
+            wrong -= 1
+        if wrong < least:
+            least = wrong
+            at = i + 1
+    if least > STEP_MIXED * c:
+        return np.inf
+    lo_a = a[order[at - 1]] if at > 0 else a[order[0]]
+    hi_a = a[order[at]] if at < c else a[order[c - 1]]
+    off = 0.5 * (lo_a + hi_a)
+    mid = 0.5 * (m0 + m1)
+    ux = u1 * t1[0] + u2 * t2[0]
+    uy = u1 * t1[1] + u2 * t2[1]
+    uz = u1 * t1[2] + u2 * t2[2]
+    line[0] = X[p, 0] + off * ux + mid * nx
+    line[1] = X[p, 1] + off * uy + mid * ny
+    line[2] = X[p, 2] + off * uz + mid * nz
+    dx, dy, dz = ny * uz - nz * uy, nz * ux - nx * uz, nx * uy - ny * ux
+    dn = np.sqrt(dx * dx + dy * dy + dz * dz)
+    line[3], line[4], line[5] = dx / dn, dy / dn, dz / dn
+    return np.sqrt(off * off + mid * mid)
 
 
 @jit
@@ -268,35 +446,12 @@ def own_layer(X, idx, c, spacing, h, normal, work):
         hi = max(hi, h[j])
     if hi - lo < LAYER_GAP_MIN * spacing:
         return c
-    cut = 0.5 * (lo + hi)
-    m0 = m1 = 0.0
-    k0 = k1 = 0
-    for _ in range(8):  # Lloyd's rounds in 1-D: the cut halfway between the layers' means
-        m0 = m1 = 0.0
-        k0 = k1 = 0
-        for j in range(c):
-            if h[j] > cut:
-                m1 += h[j]
-                k1 += 1
-            else:
-                m0 += h[j]
-                k0 += 1
-        if k0 < MIN_SIDE or k1 < MIN_SIDE:
-            return c
-        m0 /= k0
-        m1 /= k1
-        if 0.5 * (m0 + m1) == cut:
-            break
-        cut = 0.5 * (m0 + m1)
+    ok, cut, m0, m1, k0, k1, v0, v1 = _two_means(h, c)
+    if not ok:
+        return c
     gap = m1 - m0
     if gap < LAYER_GAP_MIN * spacing or gap > LAYER_GAP_MAX * spacing:
         return c
-    v0 = v1 = 0.0
-    for j in range(c):
-        if h[j] > cut:
-            v1 += (h[j] - m1) ** 2
-        else:
-            v0 += (h[j] - m0) ** 2
     limit = (LAYER_RMS * gap) ** 2
     if v0 > limit * k0 or v1 > limit * k1:
         return c
@@ -927,7 +1082,9 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     fit takes the point's own sheet alone (its local spacing still over the whole two-ring).
     Where the fit finds no edge, it is tried once more over the two-ring's points within
     ``NEAR_RING`` local spacings (:func:`near_part`, then :func:`own_layer` of those);
-    ``narrowed[p]``: whether ``p``'s fit is that second one, which
+    Where that finds none either, a step lower than the spacing is tried over the two-ring's
+    points within ``STEP_RING`` local spacings (:func:`_fit_step`: the fold reads 90°, and no
+    bend is measured). ``narrowed[p]``: whether ``p``'s fit is one of those two, which
     :func:`.simplify.boundary_flags` keeps only where another fit confirms its line.
 
     Beyond the paper, a second pass: a candidate whose two-plane fit finds no edge within
@@ -940,6 +1097,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     max_cos = np.cos(np.deg2rad(min_angle))
     mark = np.zeros(n, dtype=np.int64)
     idx = np.empty(MAX_RING + 1, dtype=np.int64)
+    whole = np.empty(MAX_RING + 1, dtype=np.int64)
     side = np.empty(MAX_RING + 1, dtype=np.int64)
     vals = np.empty(MAX_RING + 1)
     proj = np.empty(MAX_RING + 1)
@@ -967,6 +1125,8 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         local[p] = s
         if s <= 0.0:
             continue
+        whole[:c] = idx[:c]
+        c_whole = c
         c = own_layer(X, idx, c, s, proj, c1, work)  # a thin wall: the point's own sheet
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
                                     line[p], max_cos)
@@ -977,10 +1137,18 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
                 d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s,
                                             proj, line[p], max_cos)
                 narrowed[p] = d < np.inf
+        stepped = False
+        if d == np.inf:  # a step lower than the spacing: its own two-ring, near the point
+            idx[:c_whole] = whole[:c_whole]
+            c = near_part(X, idx, c_whole, STEP_RING * s)
+            d = _fit_step(X, normals, idx, c, s, proj, vals, line[p], n1, n2, work)
+            if d < np.inf:
+                angle[p] = 90.0
+                narrowed[p] = stepped = True
         # a farther line's bend is not measured: measured, far smooth folds stopped lending
         # and far soft ones became creases, F1 mixed (docs/measurements.md "Creases by the
         # quadric's excess error")
-        if d <= width * s:
+        if d <= width * s and not stepped:
             sse2 = _two_plane_sse(X, idx, c, side, c1, n1, c2, n2)
             sq = _quadric_sse(X, idx, c, s, c1, n1, c2, work, M6, r6)
             bend[p] = sq / sse2 if sse2 > 0.0 else (np.inf if sq > 0.0 else np.nan)

@@ -256,8 +256,9 @@ def _confirmed(Xu, st, fit, sure, line, spacing):
 
 def _confirm_narrowed(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend,
                       narrowed):
-    """Drops (in place) the fits over the near part of a two-ring (``narrowed``, see
-    :func:`.edge_fit.near_part`) that no other fit confirms: kept only where another lending
+    """Drops (in place) the fits over the near part of a two-ring and the steps (``narrowed``,
+    see :func:`.edge_fit.near_part` and :func:`.edge_fit._fit_step`) that no other fit
+    confirms: kept only where another lending
     fit's line runs beside theirs (:func:`.edge_fit.confirmed_lines`). A few points fit two
     planes by chance; alone, such a line made features and flags along it (measured on the 36
     CAD quality cases, docs/measurements.md "Scans: the near part of the two-ring": every
