@@ -378,12 +378,12 @@ def _fit_step(X, normals, idx, c, spacing, h, a, line, t1, t2, work):
         return np.inf
     u1 /= un
     u2 /= un
+    ux = u1 * t1[0] + u2 * t2[0]  # u in space
+    uy = u1 * t1[1] + u2 * t2[1]
+    uz = u1 * t1[2] + u2 * t2[2]
     for j in range(c):
         r = idx[j]
-        a[j] = (((X[r, 0] - X[p, 0]) * t1[0] + (X[r, 1] - X[p, 1]) * t1[1]
-                 + (X[r, 2] - X[p, 2]) * t1[2]) * u1
-                + ((X[r, 0] - X[p, 0]) * t2[0] + (X[r, 1] - X[p, 1]) * t2[1]
-                   + (X[r, 2] - X[p, 2]) * t2[2]) * u2)
+        a[j] = (X[r, 0] - X[p, 0]) * ux + (X[r, 1] - X[p, 1]) * uy + (X[r, 2] - X[p, 2]) * uz
     order = np.argsort(a[:c])
     wrong = k0  # cut before the first point: every lower point on the upper side
     least = wrong
@@ -402,9 +402,6 @@ def _fit_step(X, normals, idx, c, spacing, h, a, line, t1, t2, work):
     hi_a = a[order[at]] if at < c else a[order[c - 1]]
     off = 0.5 * (lo_a + hi_a)
     mid = 0.5 * (m0 + m1)
-    ux = u1 * t1[0] + u2 * t2[0]
-    uy = u1 * t1[1] + u2 * t2[1]
-    uz = u1 * t1[2] + u2 * t2[2]
     line[0] = X[p, 0] + off * ux + mid * nx
     line[1] = X[p, 1] + off * uy + mid * ny
     line[2] = X[p, 2] + off * uz + mid * nz
@@ -1081,7 +1078,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     Where the two-ring holds two parallel sheets (a thin wall's faces, :func:`own_layer`), the
     fit takes the point's own sheet alone (its local spacing still over the whole two-ring).
     Where the fit finds no edge, it is tried once more over the two-ring's points within
-    ``NEAR_RING`` local spacings (:func:`near_part`, then :func:`own_layer` of those);
+    ``NEAR_RING`` local spacings (:func:`near_part`, then :func:`own_layer` of those).
     Where that finds none either, a step lower than the spacing is tried over the two-ring's
     points within ``STEP_RING`` local spacings (:func:`_fit_step`: the fold reads 90°, and no
     bend is measured). ``narrowed[p]``: whether ``p``'s fit is one of those two, which

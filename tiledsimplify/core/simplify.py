@@ -258,8 +258,8 @@ def _confirm_narrowed(Xu, st, fitted, fitted_angle, line, width, spacing, corner
                       narrowed):
     """Drops (in place) the fits over the near part of a two-ring and the steps (``narrowed``,
     see :func:`.edge_fit.near_part` and :func:`.edge_fit._fit_step`) that no other fit
-    confirms: kept only where another lending
-    fit's line runs beside theirs (:func:`.edge_fit.confirmed_lines`). A few points fit two
+    confirms: each is kept only where another lending fit's line runs beside its own
+    (:func:`.edge_fit.confirmed_lines`). A few points fit two
     planes by chance; alone, such a line made features and flags along it (measured on the 36
     CAD quality cases, docs/measurements.md "Scans: the near part of the two-ring": every
     narrowed fit standing, at 6 local spacings, plate_holes' noise-0.2 scan's F1 0.780 ->
@@ -282,10 +282,10 @@ def _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend, at_
     (:func:`.edge_fit.nearest_line_distances`) — the fits on a sharp edge (a fold of
     ``SOFT_ANGLE`` or more) or a crease (:func:`.edge_fit.fold_kinds`), not smooth folds nor
     corners, within ``width`` of their own line, or within ``FAR_FIT`` widths where another
-    fit's line confirms theirs (:func:`.edge_fit.confirmed_lines`), as every fit over the near
-    part of its two-ring (``narrowed``: kept by :func:`_confirm_narrowed` beside another fit,
-    it is confirmed again among the fits left) — and the points their own corner fit flags
-    (``at_corner``)."""
+    fit's line confirms theirs (:func:`.edge_fit.confirmed_lines`), as every ``narrowed``
+    fit (over the near part of its two-ring, or a step: kept by :func:`_confirm_narrowed`
+    beside another fit, it is confirmed again among the fits left) — and the points their own
+    corner fit flags (``at_corner``)."""
     if not spacing > 0:
         return at_corner
     fit = _lending_fits(fitted, fitted_angle, width, corner, bend)
