@@ -36,6 +36,11 @@ the one-ring normals it uses are too noisy to separate edges from noise. Two ste
    **Steps** (since 2026-12-06, stop 57): where no two-plane fit gives an edge, a step lower
    than the spacing — two parallel layers side by side, its wall holding few points or none
    (counter's rib, 0.67 spacings tall) — is fitted (:func:`_fit_step`), confirmed likewise.
+   **Thin walls' rims** (since 2026-12-06, stop 59): where all of that finds nothing and the
+   two-ring holds two sheets, a plate thinner than about two spacings may end there: both
+   sheets end together along a line, past which nothing lies (:func:`_fit_rim`,
+   :func:`_rim_clear`). The rim's edge on the point's own sheet is its line; it lends flags,
+   and makes features but not the core band (:func:`.simplify.boundary_flags`).
    **Corners** (since 2026-12-05): where that fit flags no point (no edge within ``width``,
    or a farther one) but flags one in its two-ring, the two-ring is split into three planes
    (:func:`_fit_corner`) — where an edge bends (a polygonal hole's rim), where three faces
@@ -226,6 +231,18 @@ STEP_PARALLEL = 0.99
 #: counter's rib and the 36 CAD quality cases, docs/measurements.md "Steps lower than a
 #: spacing")
 STEP_MIXED = 0.1
+#: a candidate in two sheets that no other fit gives an edge is tried as a thin wall's rim
+#: (:func:`_fit_rim`): its two-ring's mean offset in the sheets' plane at least this many local
+#: spacings from the point (the two-ring lies to one side of it) ...
+RIM_OFFSET = 0.6
+#: ... both sheets reaching within this many local spacings of the farther one's border ...
+RIM_TOGETHER = 1.0
+#: ... the point within this many local spacings of that border ...
+RIM_REACH = 1.0
+#: ... and no point of its three-ring beyond the border by more than this many local spacings,
+#: as far as the three-ring reaches behind the point (:func:`_rim_clear`; measured on the 36
+#: CAD quality cases, docs/measurements.md "Thin walls' rims")
+RIM_CLEAR = 0.5
 
 
 @jit_leaf
@@ -409,6 +426,95 @@ def _fit_step(X, normals, idx, c, spacing, h, a, line, t1, t2, work):
     dn = np.sqrt(dx * dx + dy * dy + dz * dz)
     line[3], line[4], line[5] = dx / dn, dy / dn, dz / dn
     return np.sqrt(off * off + mid * mid)
+
+
+@jit
+def _fit_rim(X, idx, c, spacing, h, normal, work, line, out_dir):
+    """A thin wall's rim at ``idx[0]``: the distance from it to the rim's edge on its own sheet
+    (``inf`` where ``idx[:c]`` shows no rim), the edge into ``line`` (:func:`_edge_line`'s
+    form), the direction from the point across the edge, in the sheets' plane, into
+    ``out_dir``, the sheets' normal into ``normal``.
+
+    Beyond the paper. Where a plate is thinner than about two spacings (the tray, 3.18 mm at a
+    2.63 mm spacing) its rim face holds a point or two across, and each sheet of its two-ring
+    (:func:`own_layer`) is a plane that ends: no two-plane fit, step or corner finds the edge
+    (876 of the tray's 1,013 missed edge points had no fit). Here the two-ring
+    ``idx[:c]`` — both sheets — is taken in its PCA plane: it lies to one side of the point
+    where its mean offset in that plane is ``RIM_OFFSET`` local ``spacing``\ s or more, and the
+    border runs across that offset, through the farthest point the other way. Both sheets
+    (a 1-D 2-means of the heights, :func:`_two_means`) must reach within ``RIM_TOGETHER`` of
+    that border — a wall's faces end together — and the point must lie within ``RIM_REACH``
+    of it. The edge is the border's line in the point's own sheet. ``h``: work array of
+    length ``c`` or more; ``work``: length 3.
+    """
+    p = idx[0]
+    if c < 2 * MIN_SIDE + 1:
+        return np.inf
+    smallest_axis(*covariance_about(X, p, idx[1:], c - 1), normal, work)
+    nx, ny, nz = normal[0], normal[1], normal[2]
+    gx = gy = gz = 0.0
+    for j in range(c):
+        q = idx[j]
+        dx, dy, dz = X[q, 0] - X[p, 0], X[q, 1] - X[p, 1], X[q, 2] - X[p, 2]
+        hj = dx * nx + dy * ny + dz * nz
+        h[j] = hj
+        gx += dx - hj * nx
+        gy += dy - hj * ny
+        gz += dz - hj * nz
+    g = np.sqrt(gx * gx + gy * gy + gz * gz)
+    if g < RIM_OFFSET * spacing * c:
+        return np.inf
+    bx, by, bz = -gx / g, -gy / g, -gz / g  # across the border, away from the two-ring
+    ok, cut, m0, m1, k0, k1, v0, v1 = _two_means(h, c)
+    if not ok:
+        return np.inf
+    d0 = d1 = -np.inf
+    for j in range(c):
+        q = idx[j]
+        a = (X[q, 0] - X[p, 0]) * bx + (X[q, 1] - X[p, 1]) * by + (X[q, 2] - X[p, 2]) * bz
+        if h[j] > cut:
+            d1 = max(d1, a)
+        else:
+            d0 = max(d0, a)
+    d = max(d0, d1)
+    if min(d0, d1) < d - RIM_TOGETHER * spacing or d > RIM_REACH * spacing:
+        return np.inf
+    out_dir[0], out_dir[1], out_dir[2] = bx, by, bz
+    line[0] = X[p, 0] + d * bx
+    line[1] = X[p, 1] + d * by
+    line[2] = X[p, 2] + d * bz
+    line[3] = ny * bz - nz * by  # normal × out_dir: both unit and orthogonal
+    line[4] = nz * bx - nx * bz
+    line[5] = nx * by - ny * bx
+    return d
+
+
+@jit_leaf
+def _rim_clear(X, p, ring, k, d, spacing, out_dir, normal):
+    """Whether nothing lies beyond the rim :func:`_fit_rim` found ``d`` from ``X[p]`` across
+    ``out_dir``: no point of ``ring[:k]`` (the point's three-ring) within ``LAYER_GAP_MAX``
+    local ``spacing``\ s of its sheet's plane (``normal``) lies more than ``RIM_CLEAR``
+    spacings past the border and nearer to it than the farthest point lies behind.
+
+    Beyond the paper. On a line scan a point's local mesh may join the lines on one side of
+    its own only, and so its two-ring ends one spacing past it, like a rim's (the tray's
+XX
+    next line lies some four local spacings on, within the three-ring. ``ring``: the point's
+    three-ring (:func:`gather_rings`)."""
+    back = 0.0
+    for j in range(k):
+        q = ring[j]
+        a = ((X[q, 0] - X[p, 0]) * out_dir[0] + (X[q, 1] - X[p, 1]) * out_dir[1]
+             + (X[q, 2] - X[p, 2]) * out_dir[2])
+        back = max(back, -a)
+    for j in range(k):
+        q = ring[j]
+        dx, dy, dz = X[q, 0] - X[p, 0], X[q, 1] - X[p, 1], X[q, 2] - X[p, 2]
+        a = dx * out_dir[0] + dy * out_dir[1] + dz * out_dir[2]
+        hq = dx * normal[0] + dy * normal[1] + dz * normal[2]
+        if d + RIM_CLEAR * spacing < a < d + back and abs(hq) <= LAYER_GAP_MAX * spacing:
+            return False
+    return True
 
 
 @jit
@@ -1051,7 +1157,7 @@ def _two_plane_sse(X, idx, c, side, c1, n1, c2, n2):
 
 @jit
 def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min_angle, width,
-             corner, bend, narrowed):
+             corner, bend, narrowed, rim):
     """Step 2 for every candidate: ``out[p]`` = edge distance / local spacing (inf: no edge),
     ``angle[p]`` = the fold of the fitted faces (degrees, 0-180, see ``MIN_ANGLE``; 0 where no
     edge),
@@ -1083,6 +1189,10 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     points within ``STEP_RING`` local spacings (:func:`_fit_step`: the fold reads 90°, and no
     bend is measured). ``narrowed[p]``: whether ``p``'s fit is one of those two, which
     :func:`.simplify.boundary_flags` keeps only where another fit confirms its line.
+    Where none of them finds one either and the two-ring holds two sheets, a thin wall's rim
+    is tried (:func:`_fit_rim`, :func:`_rim_clear`: the fold reads 90°, no bend is measured);
+    ``rim[p]``: whether ``p``'s fit is a rim's, whose line makes features but not the core
+    band (:func:`.simplify.boundary_flags`).
 
     Beyond the paper, a second pass: a candidate whose two-plane fit finds no edge within
     ``width`` local spacings of it (none, or a farther one) is fitted with three planes
@@ -1105,9 +1215,13 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     work = np.empty(3)
     M6 = np.empty((6, 6))
     r6 = np.empty(6)
+    across = np.empty(3)
+    mark3 = np.zeros(0, dtype=np.int64)  # the three-rings' marks, made where a rim is tried
+    ring3 = np.empty(4 * MAX_RING, dtype=np.int64)
     for p in range(n):
         bend[p] = np.nan
         narrowed[p] = False
+        rim[p] = False
         out[p] = np.inf
         angle[p] = 0.0
         local[p] = 0.0
@@ -1125,6 +1239,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         whole[:c] = idx[:c]
         c_whole = c
         c = own_layer(X, idx, c, s, proj, c1, work)  # a thin wall: the point's own sheet
+        sheets = c < c_whole
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
                                     line[p], max_cos)
         if d == np.inf:  # a scan's two-ring reaching too far across its lines: the near part
@@ -1134,18 +1249,31 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
                 d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s,
                                             proj, line[p], max_cos)
                 narrowed[p] = d < np.inf
-        stepped = False
+        layers = False  # a step's or a rim's fit: no bend measured
         if d == np.inf:  # a step lower than the spacing: its own two-ring, near the point
             idx[:c_whole] = whole[:c_whole]
             c = near_part(X, idx, c_whole, STEP_RING * s)
             d = _fit_step(X, normals, idx, c, s, proj, vals, line[p], n1, n2, work)
             if d < np.inf:
                 angle[p] = 90.0
-                narrowed[p] = stepped = True
+                narrowed[p] = layers = True
+        if d == np.inf and sheets:  # a thin wall's rim, where both its sheets end
+            idx[:c_whole] = whole[:c_whole]
+            c = c_whole
+            d = _fit_rim(X, idx, c, s, proj, c1, work, line[p], across)
+            if d < np.inf:
+                if mark3.shape[0] == 0:
+                    mark3 = np.zeros(n, dtype=np.int64)
+                k = gather_rings(p, dn, dn_cnt, FIT_RINGS + 1, mark3, ring3)
+                if _rim_clear(X, p, ring3, k, d, s, across, c1):
+                    angle[p] = 90.0
+                    rim[p] = layers = True
+                else:
+                    d = np.inf
         # a farther line's bend is not measured: measured, far smooth folds stopped lending
         # and far soft ones became creases, F1 mixed (docs/measurements.md "Creases by the
         # quadric's excess error")
-        if d <= width * s and not stepped:
+        if d <= width * s and not layers:
             sse2 = _two_plane_sse(X, idx, c, side, c1, n1, c2, n2)
             sq = _quadric_sse(X, idx, c, s, c1, n1, c2, work, M6, r6)
             bend[p] = sq / sse2 if sse2 > 0.0 else (np.inf if sq > 0.0 else np.nan)
