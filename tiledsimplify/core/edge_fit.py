@@ -243,6 +243,9 @@ RIM_REACH = 1.0
 #: as far as the three-ring reaches behind the point (:func:`_rim_clear`; measured on the 36
 #: CAD quality cases, docs/measurements.md "Thin walls' rims")
 RIM_CLEAR = 0.5
+#: a crease whose faces, each fitted by a parabola across its line, fold by less than this
+#: there (degrees) is a fillet's tangent edge, not a crease (:func:`_fold_at_line`)
+LINE_FOLD = 21.0
 
 
 @jit_leaf
@@ -1143,6 +1146,67 @@ def _quadric_sse(X, idx, c, spacing, normal, t1, t2, work, M, r):
     return max(sse, 0.0) * spacing * spacing
 
 
+@jit
+def _fold_at_line(X, idx, c, side, n1, n2, line, spacing, M, r):
+    """The fold at the fitted ``line`` of the faces of a two-plane split (``side``, the
+    planes' normals ``n1``, ``n2``): each side's points as heights over its plane, fitted by a
+    parabola across the line, whose tangent at the line is the face's there; degrees, 0-180
+    (180 where a side fits no parabola)."""
+    ax, ay, az = line[0], line[1], line[2]
+    ux, uy, uz = line[3], line[4], line[5]
+    t0 = np.empty(3)
+    t1 = np.empty(3)
+    for which in range(2):
+        nx, ny, nz = (n1[0], n1[1], n1[2]) if which == 0 else (n2[0], n2[1], n2[2])
+        dx, dy, dz = ny * uz - nz * uy, nz * ux - nx * uz, nx * uy - ny * ux
+        dn = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if not dn > 0.0:
+            return 180.0
+        dx, dy, dz = dx / dn, dy / dn, dz / dn
+        M[:3, :3] = 0.0
+        r[:3] = 0.0
+        k = 0
+        at = 0.0
+        for j in range(c):
+            if side[j] != which:
+                continue
+            q = idx[j]
+            ex, ey, ez = X[q, 0] - ax, X[q, 1] - ay, X[q, 2] - az
+            at += ex * dx + ey * dy + ez * dz
+            k += 1
+        if k < 4:
+            return 180.0
+        sg = 1.0 if at >= 0.0 else -1.0  # across the line towards the side's points
+        for j in range(c):
+            if side[j] != which:
+                continue
+            q = idx[j]
+            ex, ey, ez = X[q, 0] - ax, X[q, 1] - ay, X[q, 2] - az
+            t = sg * (ex * dx + ey * dy + ez * dz) / spacing
+            h = (ex * nx + ey * ny + ez * nz) / spacing
+            tt = t * t
+            M[0, 0] += 1.0
+            M[0, 1] += t
+            M[0, 2] += tt
+            M[1, 2] += tt * t
+            M[2, 2] += tt * tt
+            r[0] += h
+            r[1] += t * h
+            r[2] += tt * h
+        M[1, 0] = M[0, 1]
+        M[1, 1] = M[0, 2]
+        M[2, 0] = M[0, 2]
+        M[2, 1] = M[1, 2]
+        if not solve_small(M, r, 3):
+            return 180.0
+        tan = t0 if which == 0 else t1
+        tan[0], tan[1], tan[2] = sg * dx + r[1] * nx, sg * dy + r[1] * ny, sg * dz + r[1] * nz
+    c0 = np.sqrt(t0[0] ** 2 + t0[1] ** 2 + t0[2] ** 2)
+    c1_ = np.sqrt(t1[0] ** 2 + t1[1] ** 2 + t1[2] ** 2)
+    cs = (t0[0] * t1[0] + t0[1] * t1[1] + t0[2] * t1[2]) / (c0 * c1_)
+    return 180.0 - np.degrees(np.arccos(min(1.0, max(-1.0, cs))))
+
+
 @jit_leaf
 def _two_plane_sse(X, idx, c, side, c1, n1, c2, n2):
     """Sum of squared distances of the points of a two-plane split to their planes: the planes
@@ -1275,10 +1339,14 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         # quadric's excess error")
         if d <= width * s and not layers:
             sse2 = _two_plane_sse(X, idx, c, side, c1, n1, c2, n2)
+            at_line = (_fold_at_line(X, idx, c, side, n1, n2, line[p], s, M6, r6)
+                       if angle[p] < SOFT_ANGLE else 180.0)
             sq = _quadric_sse(X, idx, c, s, c1, n1, c2, work, M6, r6)
             bend[p] = sq / sse2 if sse2 > 0.0 else (np.inf if sq > 0.0 else np.nan)
             if sq - sse2 >= CREASE_EXCESS * c * s * s:  # noise raises both alike
                 bend[p] = max(bend[p], SHARP_RATIO)
+            if bend[p] >= SHARP_RATIO and at_line < LINE_FOLD:
+                bend[p] = 1.0
         out[p] = d / s
     # the corners: after every two-plane fit, which they need beside them
     mark[:] = 0
