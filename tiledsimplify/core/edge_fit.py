@@ -1236,8 +1236,10 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     corner's line replaced it
     — ``inf`` where the planes fit exactly and the quadric does not; at least ``SHARP_RATIO``
     where the quadric's squared error exceeds the planes' by ``CREASE_EXCESS`` squared local
-    spacings a point): below ``SMOOTH_RATIO`` a smooth fold, at or above ``SHARP_RATIO`` a
-    crease (:func:`fold_kinds`).
+    spacings a point; 1 where a soft fit's faces, each fitted by a parabola across its line,
+    fold there by less than ``LINE_FOLD``, :func:`_fold_at_line`: a fillet's facets, no
+    crease): below ``SMOOTH_RATIO`` a smooth fold, at or above ``SHARP_RATIO`` a crease
+    (:func:`fold_kinds`).
     ``min_angle``: the least fold of a sharp edge, in degrees (``MIN_ANGLE`` by default, the
     option ``edge_angle``; at most 90: the test is on the planes' angle, so wedges whose faces
     meet at less than it are not found either).
