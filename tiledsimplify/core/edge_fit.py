@@ -432,11 +432,11 @@ def _fit_step(X, normals, idx, c, spacing, h, a, line, t1, t2, work):
 
 
 @jit
-def _fit_rim(X, idx, c, spacing, h, normal, work, line, out_dir):
+def _fit_rim(X, idx, c, spacing, h, normal, line, out_dir):
     """A thin wall's rim at ``idx[0]``: the distance from it to the rim's edge on its own sheet
     (``inf`` where ``idx[:c]`` shows no rim), the edge into ``line`` (:func:`_edge_line`'s
     form), the direction from the point across the edge, in the sheets' plane, into
-    ``out_dir``, the sheets' normal into ``normal``.
+    ``out_dir``. ``normal``: the two-ring's PCA normal, as :func:`own_layer` left it.
 
     Beyond the paper. Where a plate is thinner than about two spacings (the tray, 3.18 mm at a
     2.63 mm spacing) its rim face holds a point or two across, and each sheet of its two-ring
@@ -448,12 +448,11 @@ def _fit_rim(X, idx, c, spacing, h, normal, work, line, out_dir):
     Both sheets (a 1-D 2-means of the heights, :func:`_two_means`) must reach within
     ``RIM_TOGETHER`` of that border — a wall's faces end together — and the point must lie
     within ``RIM_REACH`` of it. The edge is the border's line in the point's own sheet.
-    ``h``: work array of length ``c`` or more; ``work``: length 3.
+    ``h``: work array of length ``c`` or more.
     """
     p = idx[0]
     if c < 2 * MIN_SIDE + 1:
         return np.inf
-    smallest_axis(*covariance_about(X, p, idx[1:], c - 1), normal, work)
     nx, ny, nz = normal[0], normal[1], normal[2]
     gx = gy = gz = 0.0
     for j in range(c):
@@ -1146,64 +1145,67 @@ def _quadric_sse(X, idx, c, spacing, normal, t1, t2, work, M, r):
     return max(sse, 0.0) * spacing * spacing
 
 
-@jit
-def _fold_at_line(X, idx, c, side, n1, n2, line, spacing, M, r):
-    """The fold at the fitted ``line`` of the faces of a two-plane split (``side``, the
-    planes' normals ``n1``, ``n2``): each side's points as heights over its plane, fitted by a
-    parabola across the line, whose tangent at the line is the face's there; degrees, 0-180
-    (180 where a side fits no parabola)."""
+@jit_leaf
+def _face_tangent(X, idx, c, side, which, n, line, spacing, M, r, tangent):
+    """The tangent at the fitted ``line`` of face ``which`` of a two-plane split (``side``,
+    its plane's normal ``n``), pointing away from the line: its points' heights over the
+    plane fitted by a parabola across the line (in ``spacing`` units; ``M``, ``r``: 3 x 3 and
+    3 work arrays), into ``tangent``; False where the face has fewer than 4 points or fits no
+    parabola."""
     ax, ay, az = line[0], line[1], line[2]
     ux, uy, uz = line[3], line[4], line[5]
-    t0 = np.empty(3)
-    t1 = np.empty(3)
-    for which in range(2):
-        nx, ny, nz = (n1[0], n1[1], n1[2]) if which == 0 else (n2[0], n2[1], n2[2])
-        dx, dy, dz = ny * uz - nz * uy, nz * ux - nx * uz, nx * uy - ny * ux
-        dn = np.sqrt(dx * dx + dy * dy + dz * dz)
-        if not dn > 0.0:
-            return 180.0
-        dx, dy, dz = dx / dn, dy / dn, dz / dn
-        M[:3, :3] = 0.0
-        r[:3] = 0.0
-        k = 0
-        at = 0.0
-        for j in range(c):
-            if side[j] != which:
-                continue
-            q = idx[j]
-            ex, ey, ez = X[q, 0] - ax, X[q, 1] - ay, X[q, 2] - az
-            at += ex * dx + ey * dy + ez * dz
-            k += 1
-        if k < 4:
-            return 180.0
-        sg = 1.0 if at >= 0.0 else -1.0  # across the line towards the side's points
-        for j in range(c):
-            if side[j] != which:
-                continue
-            q = idx[j]
-            ex, ey, ez = X[q, 0] - ax, X[q, 1] - ay, X[q, 2] - az
-            t = sg * (ex * dx + ey * dy + ez * dz) / spacing
-            h = (ex * nx + ey * ny + ez * nz) / spacing
-            tt = t * t
-            M[0, 0] += 1.0
-            M[0, 1] += t
-            M[0, 2] += tt
-            M[1, 2] += tt * t
-            M[2, 2] += tt * tt
-            r[0] += h
-            r[1] += t * h
-            r[2] += tt * h
-        M[1, 0] = M[0, 1]
-        M[1, 1] = M[0, 2]
-        M[2, 0] = M[0, 2]
-        M[2, 1] = M[1, 2]
-        if not solve_small(M, r, 3):
-            return 180.0
-        tan = t0 if which == 0 else t1
-        tan[0], tan[1], tan[2] = sg * dx + r[1] * nx, sg * dy + r[1] * ny, sg * dz + r[1] * nz
-    c0 = np.sqrt(t0[0] ** 2 + t0[1] ** 2 + t0[2] ** 2)
-    c1_ = np.sqrt(t1[0] ** 2 + t1[1] ** 2 + t1[2] ** 2)
-    cs = (t0[0] * t1[0] + t0[1] * t1[1] + t0[2] * t1[2]) / (c0 * c1_)
+    dx, dy, dz = n[1] * uz - n[2] * uy, n[2] * ux - n[0] * uz, n[0] * uy - n[1] * ux
+    dn = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if not dn > 0.0:
+        return False
+    dx, dy, dz = dx / dn, dy / dn, dz / dn  # across the line in the plane, either sense
+    M[:3, :3] = 0.0
+    r[:3] = 0.0
+    for j in range(c):
+        if side[j] != which:
+            continue
+        q = idx[j]
+        ex, ey, ez = X[q, 0] - ax, X[q, 1] - ay, X[q, 2] - az
+        t = (ex * dx + ey * dy + ez * dz) / spacing
+        h = (ex * n[0] + ey * n[1] + ez * n[2]) / spacing
+        tt = t * t
+        M[0, 0] += 1.0
+        M[0, 1] += t
+        M[0, 2] += tt
+        M[1, 2] += tt * t
+        M[2, 2] += tt * tt
+        r[0] += h
+        r[1] += t * h
+        r[2] += tt * h
+    if M[0, 0] < 4.0:
+        return False
+    if M[0, 1] < 0.0:  # towards the face's points: t -> -t flips the odd sums (exactly)
+        dx, dy, dz = -dx, -dy, -dz
+        M[0, 1] = -M[0, 1]
+        M[1, 2] = -M[1, 2]
+        r[1] = -r[1]
+    M[1, 0] = M[0, 1]
+    M[1, 1] = M[0, 2]
+    M[2, 0] = M[0, 2]
+    M[2, 1] = M[1, 2]
+    if not solve_small(M, r, 3):
+        return False
+    tangent[0], tangent[1], tangent[2] = dx + r[1] * n[0], dy + r[1] * n[1], dz + r[1] * n[2]
+    return True
+
+
+@jit_leaf
+def _fold_at_line(X, idx, c, side, n1, n2, line, spacing, M, r, t1, t2):
+    """The fold at the fitted ``line`` of the faces of a two-plane split (``side``, the
+    planes' normals ``n1``, ``n2``): the angle between their tangents there
+    (:func:`_face_tangent`, into the work vectors ``t1``, ``t2``); degrees, 0-180 (180 where
+    a face fits no parabola)."""
+    if not (_face_tangent(X, idx, c, side, 0, n1, line, spacing, M, r, t1)
+            and _face_tangent(X, idx, c, side, 1, n2, line, spacing, M, r, t2)):
+        return 180.0
+    l1 = t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2]
+    l2 = t2[0] * t2[0] + t2[1] * t2[1] + t2[2] * t2[2]
+    cs = (t1[0] * t2[0] + t1[1] * t2[1] + t1[2] * t2[2]) / np.sqrt(l1 * l2)
     return 180.0 - np.degrees(np.arccos(min(1.0, max(-1.0, cs))))
 
 
@@ -1282,6 +1284,8 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     M6 = np.empty((6, 6))
     r6 = np.empty(6)
     across = np.empty(3)
+    sheet_n = np.empty(3)  # the whole two-ring's PCA normal, own_layer's: a rim's sheets'
+    qt = np.empty(3)
     mark3 = np.zeros(0, dtype=np.int64)  # the three-rings' marks, made where a rim is tried
     ring3 = np.empty(4 * MAX_RING, dtype=np.int64)
     for p in range(n):
@@ -1304,7 +1308,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
             continue
         whole[:c] = idx[:c]
         c_whole = c
-        c = own_layer(X, idx, c, s, proj, c1, work)  # a thin wall: the point's own sheet
+        c = own_layer(X, idx, c, s, proj, sheet_n, work)  # a thin wall: the point's own sheet
         sheets = c < c_whole
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
                                     line[p], max_cos)
@@ -1326,12 +1330,12 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         if d == np.inf and sheets:  # a thin wall's rim, where both its sheets end
             idx[:c_whole] = whole[:c_whole]
             c = c_whole
-            d = _fit_rim(X, idx, c, s, proj, c1, work, line[p], across)
+            d = _fit_rim(X, idx, c, s, proj, sheet_n, line[p], across)
             if d < np.inf:
                 if mark3.shape[0] == 0:
                     mark3 = np.zeros(n, dtype=np.int64)
                 k = gather_rings(p, dn, dn_cnt, FIT_RINGS + 1, mark3, ring3)
-                if _rim_clear(X, p, ring3, k, d, s, across, c1):
+                if _rim_clear(X, p, ring3, k, d, s, across, sheet_n):
                     angle[p] = 90.0
                     rim[p] = layers = True
                 else:
@@ -1341,14 +1345,14 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         # quadric's excess error")
         if d <= width * s and not layers:
             sse2 = _two_plane_sse(X, idx, c, side, c1, n1, c2, n2)
-            at_line = (_fold_at_line(X, idx, c, side, n1, n2, line[p], s, M6, r6)
-                       if angle[p] < SOFT_ANGLE else 180.0)
-            sq = _quadric_sse(X, idx, c, s, c1, n1, c2, work, M6, r6)
+            sq = _quadric_sse(X, idx, c, s, c1, c2, qt, work, M6, r6)  # n1, n2 stay
             bend[p] = sq / sse2 if sse2 > 0.0 else (np.inf if sq > 0.0 else np.nan)
             if sq - sse2 >= CREASE_EXCESS * c * s * s:  # noise raises both alike
                 bend[p] = max(bend[p], SHARP_RATIO)
-            if bend[p] >= SHARP_RATIO and at_line < LINE_FOLD:
-                bend[p] = 1.0
+            if (bend[p] >= SHARP_RATIO and angle[p] < SOFT_ANGLE
+                    and _fold_at_line(X, idx, c, side, n1, n2, line[p], s, M6, r6, c1, c2)
+                    < LINE_FOLD):
+                bend[p] = 1.0  # a crease by its bend whose faces do not fold at its line
         out[p] = d / s
     # the corners: after every two-plane fit, which they need beside them
     mark[:] = 0
