@@ -105,6 +105,39 @@ def test_a_wedge_needs_points_at_its_line(start, found):
         assert d == np.inf and fold == 0.0
 
 
+def test_a_face_needs_two_points_off_its_line(monkeypatch):
+    # a two-ring of Fandisk's noise-0.1 scan (point 9752 and its 12 neighbours, in units of its
+    # local spacing, normals to 3 decimals), on a smooth face far from any edge: three scan
+    # lines 4 spacings apart and one point 21 spacings off. The planes of "the line through
+    # the point plus the far point" and "the other two lines" fold by 55°: a crease along a
+    # scan line, whose one far point fixes its plane's tilt. Each face needs MIN_OFF points
+    # more than half a spacing from the line.
+    X = np.array([[0.0, 0.0, 0.0], [9.925, 9.56, -17.082], [-0.752, -8.163, 1.001],
+                  [0.137, -8.11, 1.502], [0.925, -8.077, 2.118], [-1.731, -0.085, -1.05],
+                  [-0.721, -0.02, -0.687], [-1.228, -4.114, -0.042], [-0.375, -4.071, 0.499],
+                  [0.835, 0.038, 0.557], [0.466, -4.029, 1.052], [1.665, 0.075, 1.12],
+                  [1.356, -3.98, 1.549]])
+    normals = np.array([[-0.606, 0.157, 0.78], [-0.58, 0.144, 0.802], [-0.579, 0.14, 0.803],
+                        [-0.554, 0.142, 0.821], [-0.543, 0.158, 0.825], [-0.451, 0.175, 0.875],
+                        [-0.572, 0.163, 0.804], [-0.571, 0.144, 0.808], [-0.579, 0.15, 0.801],
+                        [-0.543, 0.141, 0.828], [-0.556, 0.143, 0.819], [-0.626, 0.119, 0.771],
+                        [-0.544, 0.15, 0.826]])
+    c = len(X)
+
+    def fit(edge_distance):
+        work = [np.empty(3) for _ in range(5)]
+        return edge_distance(X, normals, np.arange(c), c, np.empty(c, dtype=np.int64), *work,
+                             1.0, np.empty(c), np.empty(6), np.cos(np.deg2rad(edge_fit.MIN_ANGLE)))
+
+    assert edge_fit.MIN_OFF == 2
+    assert fit(edge_fit.edge_distance) == (np.inf, 0.0)
+    # without the test (the Python functions, which read the module's constant) it is a crease
+    monkeypatch.setattr(edge_fit, "_fit_edge", edge_fit._fit_edge.py_func)
+    monkeypatch.setattr(edge_fit, "MIN_OFF", 0)
+    d, fold = fit(edge_fit.edge_distance.py_func)
+    assert d < 0.1 and fold == pytest.approx(55.4, abs=0.1)
+
+
 def test_edge_angle_sets_the_least_fold_of_a_sharp_edge():
     # a ridge folding by 35°: below the default least fold (40°), above 30°
     X = _roof(np.random.default_rng(6), 8000, angle_deg=145.0)
@@ -264,7 +297,9 @@ def test_boundary_found_on_a_noisy_line_scan(data_dir, noise):
     reach one spacing from a sharp line, not only its core band (0.746 / 0.759; the band
     nearest the line 0.737 / 0.735 at precision 0.77). Creases lending flags as sharp edges
     do (``edge_fit.SHARP_RATIO``) cost precision here: 0.719 / 0.744 at precision 0.644 /
-    0.664."""
+    0.664. Since a face needs two points off its line (``edge_fit.MIN_OFF``): flags 0.767 ->
+    0.765 / 0.744 -> 0.754, the band 0.729 -> 0.717 / 0.732 -> 0.724 (precision 0.764 ->
+    0.775 / 0.752 -> 0.771, recall 0.697 -> 0.667 / 0.713 -> 0.682)."""
     V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
     s = synthetic.spacing(synthetic.scan(V, F, n_points=12000, seed=0)[0])
     X, _ = synthetic.scan(V, F, n_points=12000, noise=noise * s, seed=0)
@@ -273,7 +308,7 @@ def test_boundary_found_on_a_noisy_line_scan(data_dir, noise):
     bd = metrics.boundary_detection(X, res.boundary, edge_segments=seg, spacing=s)
     assert bd["f1"] >= 0.71 and bd["precision"] >= 0.63, bd
     core = metrics.boundary_detection(X, res.band, edge_segments=seg, spacing=s)
-    assert core["f1"] >= 0.72 and core["precision"] >= 0.75, core
+    assert core["f1"] >= 0.71 and core["precision"] >= 0.75, core
 
 
 def _naive_borrow(X, dn, dn_cnt, candidate, distance, angle, line, local, width, corner):

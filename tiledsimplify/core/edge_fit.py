@@ -137,6 +137,15 @@ MAX_RMS = 0.8
 MIN_SPREAD = 0.25
 #: at most this fraction of a side's points may lie on the wrong side of the fitted edge
 MAX_MIXED = 0.1
+#: each side of a two-plane fit holds at least this many points farther than half a spacing
+#: from the fitted line: on a scan, a side of one scan line along the line and one point far
+#: off it fits its plane exactly at whatever tilt that point gives (Fandisk's scans: creases
+#: folding 45-60° along a scan line on a smooth face). Measured on the 39 quality cases
+#: (docs/measurements.md "A face needs two points off its line"): boundary F1 geometric mean
+#: on the 24 scans +0.9 % (Fandisk's 0.767 -> 0.784 and 0.737 -> 0.759, plate_holes' noise-0.1
+#: scan 0.868 -> 0.901), on the 12 even parts -0.2 %; 3 trades recall for precision
+#: (angle_block's noise-0.2 scan, ADIS16480's noise-0.1 scan lose)
+MIN_OFF = 2
 #: rounds of assign-and-refit in the two-plane fit
 ROUNDS = 4
 #: rings of the local mesh the two-plane fit uses (3 measured: Fandisk F1 0.91 -> 0.86)
@@ -894,7 +903,9 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
     plane exceeds ``MAX_RMS`` spacings (a curved or rough patch, not two faces), sides that do
     not lie each on its own side of the line (more than ``MAX_MIXED`` of a side's points
     farther than half a spacing from the line on the wrong side: a noisy surface split in two
-    interleaved halves, not two faces meeting), or a wedge with no point within a spacing of
+    interleaved halves, not two faces meeting), a side with fewer than ``MIN_OFF`` points
+    farther than half a spacing from the line (a scan line along it and one far point: the
+    plane's tilt is that point's alone), or a wedge with no point within a spacing of
     its line (two halves of one noisy face whose planes meet far off, both on one side).
     """
     max_rms = MAX_RMS * spacing
@@ -949,7 +960,7 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
                 pos += 1
             elif o < -0.5 * spacing:
                 neg += 1
-        if min(pos, neg) > MAX_MIXED * (pos + neg):
+        if min(pos, neg) > MAX_MIXED * (pos + neg) or pos + neg < MIN_OFF:
             return np.inf, 0.0
         if total < 0.0:
             signs = -signs
