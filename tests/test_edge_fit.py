@@ -19,7 +19,8 @@ def _roof(rng, n, angle_deg=90.0, noise=0.0):
     return X + noise * rng.normal(size=X.shape)
 
 
-def _localise(X, st, candidate, min_angle=edge_fit.MIN_ANGLE, width=1.0, rim=None):
+def _localise(X, st, candidate, min_angle=edge_fit.MIN_ANGLE, width=1.0, rim=None,
+              filled=False):
     """``edge_fit.localise`` of the ``candidate`` points of centred ``X`` (neighbourhoods
     ``st``): ``(nn, dist, angle, line, local, corner, bend, narrowed)``; the rim fits into
     ``rim`` (a bool array of ``len(X)``) if given."""
@@ -30,7 +31,7 @@ def _localise(X, st, candidate, min_angle=edge_fit.MIN_ANGLE, width=1.0, rim=Non
     corner, bend, narrowed = np.empty(n, bool), np.empty(n), np.empty(n, bool)
     edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, candidate, dist, angle, line, local,
                       min_angle, width, corner, bend, narrowed,
-                      np.empty(n, bool) if rim is None else rim)
+                      np.empty(n, bool) if rim is None else rim, filled)
     return nn, dist, angle, line, local, corner, bend, narrowed
 
 
@@ -928,6 +929,67 @@ def test_a_thin_plates_rim_is_fitted_where_both_sheets_end(data_dir, noise):
         assert rim.sum() > 250 and (d[rim] <= 1).all()
     else:
         assert rim.sum() > 60 and (d[rim] > 3).sum() < 0.3 * rim.sum()
+    # the border test (an empty angle about the point) runs where the sampling fills its
+    # tangent planes: evenly, 90 borders more (402 in all), every one within a spacing of an
+    # edge; the scans' lines leave empty angles everywhere, and it does not run there
+    st = neighbourhoods(Xc, scale_of(Xc))
+    gap = edge_fit.median_ring_gap(Xc, st.normals, st.dn, st.dn_cnt, synthetic.spacing(Xc),
+                                   512)
+    assert (gap < edge_fit.FILLED_GAP) == (noise is None)
+    if noise is None:
+        border = np.empty(len(X), bool)
+        _, out, angle, *_ = _localise(Xc, st, np.ones(len(X), bool), rim=border, filled=True)
+        assert (rim & ~border).sum() == 0 and (border & ~rim).sum() > 50
+        assert (d[border] <= 1).all() and (out[border & ~rim] == 0.0).all()
+
+
+def _two_sheets(rng, points, gap=1.2):
+    """A plate ``gap`` thick (z = 0 and z = gap), each sheet sampled at ``points`` (x, y)."""
+    other = points + 0.2 * rng.normal(size=points.shape)
+    return np.vstack([np.c_[points, np.zeros(len(points))], np.c_[other, np.full(len(other), gap)]])
+
+
+@pytest.mark.parametrize("where, found", [(0.0, True), (-3.0, False)])
+def test_a_border_is_an_empty_angle_about_the_point(where, found):
+    # a plate's half (x <= 0), evenly sampled at spacing 1: at its border, the points within
+    # BORDER_REACH leave half the circle empty; inside, no angle is empty
+    rng = np.random.default_rng(3)
+    g = np.mgrid[-8:0.5:1.0, -6:6.5:1.0].reshape(2, -1).T.astype(float)
+    g[:, 1] += 0.5 * (np.round(g[:, 0]) % 2)  # hexagonal rows
+    g += 0.1 * rng.normal(size=g.shape)
+    g = g[g[:, 0] <= 0.1]
+    p = np.argmin(np.abs(g[:, 0] - where) + np.abs(g[:, 1]))
+    X = _two_sheets(rng, g)
+    line = np.empty(6)
+    ring = np.array([q for q in range(len(X)) if q != p])
+    d = edge_fit._border_gap(X, p, ring, len(ring), 1.0, np.array([0.0, 0.0, 1.0]),
+                             np.empty(len(ring)), line)
+    if found:
+        assert d == 0.0 and np.allclose(line[:3], X[p]) and abs(line[4]) > 0.95  # along y
+    else:
+        assert d == np.inf
+
+
+def test_a_line_scan_shows_no_border_and_does_not_fill_its_planes():
+    # scan lines 4 apart (x), points 1 apart along them (y): within BORDER_REACH a point sees
+    # its own line only, two empty half circles; the sampling's median empty angle is 180°
+    rng = np.random.default_rng(4)
+    g = np.mgrid[-16:16.5:4.0, -20:20.5:1.0].reshape(2, -1).T.astype(float)
+    g += 0.05 * rng.normal(size=g.shape)
+    X = np.c_[g, 0.05 * rng.normal(size=len(g))]
+    p = np.argmin(np.abs(X[:, 0]) + np.abs(X[:, 1]))
+    ring = np.array([q for q in range(len(X)) if q != p])
+    assert edge_fit._border_gap(X, p, ring, len(ring), 1.0, np.array([0.0, 0.0, 1.0]),
+                                np.empty(len(ring)), np.empty(6)) == np.inf
+    st = neighbourhoods(X, scale_of(X))
+    gap = edge_fit.median_ring_gap(X, st.normals, st.dn, st.dn_cnt, 1.0, 256)
+    assert gap > edge_fit.FILLED_GAP
+    even = np.mgrid[-16:16.5:1.0, -20:20.5:1.0].reshape(2, -1).T
+    even = even + 0.2 * rng.normal(size=even.shape)
+    Xe = np.c_[even, 0.05 * rng.normal(size=len(even))]
+    st = neighbourhoods(Xe, scale_of(Xe))
+    gap = edge_fit.median_ring_gap(Xe, st.normals, st.dn, st.dn_cnt, 1.0, 256)
+    assert gap < edge_fit.FILLED_GAP
 
 
 def _scanned_step(rng, height=5.0, pitch=0.01, lines=4.0, noise=0.1):

@@ -89,8 +89,9 @@ import numpy as np
 from ._jit import jit, jit_inline, jit_leaf
 from .boundary import deviation_at
 from .cell_grid import sq_dist
-from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covariance,
-                     orient_canonical, smallest_axis, solve_small, sym3_eigvals, tangent_basis)
+from .linalg import (NO_MOMENTS, add_moments, any_perpendicular, covariance_about,
+                     moments_covariance, orient_canonical, smallest_axis, solve_small,
+                     sym3_eigvals, tangent_basis)
 
 #: default candidate threshold on the smoothed deviation (radians, ~4.6°)
 CANDIDATE = 0.08
@@ -252,6 +253,21 @@ RIM_REACH = 1.0
 #: as far as the three-ring reaches behind the point (:func:`_rim_clear`; measured on the 36
 #: CAD quality cases, docs/measurements.md "Thin walls' rims")
 RIM_CLEAR = 0.5
+#: a thin wall's border where no rim fits (:func:`_border_gap`; measured on the 39 quality
+#: cases, docs/measurements.md "A thin wall's border"): the points of the three-ring within
+#: ``BORDER_REACH`` local spacings, projected on the sheets' plane, leave an empty angle of at
+#: least ``BORDER_GAP`` degrees about the point (100 / 140: the tray's F1 0.720 / 0.714, at
+#: precision 0.733 / 0.816; 0.713 at 0.795 with 120) ...
+BORDER_REACH = 2.5
+BORDER_GAP = 120.0
+#: ... and none other wider than ``BORDER_SECOND`` degrees, among ``BORDER_MIN`` points or more
+BORDER_SECOND = 75.0
+BORDER_MIN = 6
+#: the border test needs a sampling that fills the tangent plane: a line scan leaves empty
+#: angles of 180° between its lines everywhere. Filled: the median empty angle of the points'
+#: two-rings (:func:`median_ring_gap`) below this many degrees (46-58° on the evenly sampled
+#: CAD parts, 177-184° on their line scans)
+FILLED_GAP = 90.0
 #: a crease whose faces, each fitted by a parabola across its line, fold by less than this
 #: there (degrees) is a fillet's tangent edge, not a crease (:func:`_fold_at_line`)
 LINE_FOLD = 21.0
@@ -526,6 +542,135 @@ def _rim_clear(X, p, ring, k, d, spacing, out_dir, normal):
         if d + RIM_CLEAR * spacing < a < d + back and abs(hq) <= LAYER_GAP_MAX * spacing:
             return False
     return True
+
+
+@jit_leaf
+def _largest_gap(ang, m):
+    """``(largest, second, start)``: the two widest empty angles between the angles
+    ``ang[:m]`` (radians, m >= 2; sorted here, in place, by insertion: a few dozen, and
+    quicker to compile than ``np.sort``), the widest's start angle."""
+    for i in range(1, m):
+        a = ang[i]
+        j = i - 1
+        while j >= 0 and ang[j] > a:
+            ang[j + 1] = ang[j]
+            j -= 1
+        ang[j + 1] = a
+    largest = second = 0.0
+    start = 0.0
+    for i in range(m):
+        g = (ang[i + 1] if i + 1 < m else ang[0] + 2.0 * np.pi) - ang[i]
+        if g > largest:
+            second = largest
+            largest = g
+            start = ang[i]
+        elif g > second:
+            second = g
+    return largest, second, start
+
+
+@jit
+def _border_gap(X, p, ring, k, spacing, normal, ang, line):
+    """A thin wall's border at ``X[p]``: 0 with the border's line through the point into
+    ``line`` where ``ring[:k]`` (its three-ring) leaves an empty angle about it, ``inf``
+    where it does not. The points within ``LAYER_GAP_MAX`` local spacings (``spacing``) of
+    the sheets' plane (``normal``: both sheets, a hole passes through both) and within
+    ``BORDER_REACH`` of the point, projected on that plane, must leave one empty angle of
+    ``BORDER_GAP`` or more and no other of ``BORDER_SECOND``; the line runs in the plane across
+    the empty angle's bisector. ``ang``: work array of length ``k`` or more.
+
+    Beyond the paper. A rim (:func:`_fit_rim`) needs the whole two-ring to one side of the
+    point, both sheets ending together within a spacing. The empty angle about a point is the
+    classic border test of an open surface's sampling (PCL's boundary estimation takes 90°):
+    inside the tray's faces, evenly sampled, the widest is 46-78° (10th-90th percentile); it
+    exceeds 100° at 85 % of the points within half a spacing of an edge. Here it finds 90
+    more of the tray's rim points (402, all within a spacing of an edge), along its outer rim
+    and slot where :func:`_fit_rim`'s tests fail: F1 0.682 -> 0.713. Not its small holes (3.8
+    spacings across at 20k points): a hole's wall projects onto its circle, whose points fill
+    all but some 100° about a point on it. On line scans the angle reads 180° everywhere:
+    :func:`localise` tries it only on samplings that fill the plane (``FILLED_GAP``).
+    """
+    nx, ny, nz = normal[0], normal[1], normal[2]
+    u = np.empty(3)
+    any_perpendicular(nx, ny, nz, u)
+    vx, vy, vz = ny * u[2] - nz * u[1], nz * u[0] - nx * u[2], nx * u[1] - ny * u[0]
+    r2 = (BORDER_REACH * spacing) ** 2
+    hmax = LAYER_GAP_MAX * spacing
+    m = 0
+    for j in range(k):
+        q = ring[j]
+        if q == p:
+            continue
+        dx, dy, dz = X[q, 0] - X[p, 0], X[q, 1] - X[p, 1], X[q, 2] - X[p, 2]
+        h = dx * nx + dy * ny + dz * nz
+        if abs(h) > hmax:
+            continue
+        tx, ty, tz = dx - h * nx, dy - h * ny, dz - h * nz
+        t2 = tx * tx + ty * ty + tz * tz
+        if t2 > r2 or t2 <= 0.0:
+            continue
+        ang[m] = np.arctan2(tx * vx + ty * vy + tz * vz, tx * u[0] + ty * u[1] + tz * u[2])
+        m += 1
+    if m < BORDER_MIN:
+        return np.inf
+    largest, second, start = _largest_gap(ang, m)
+    if largest < np.deg2rad(BORDER_GAP) or second >= np.deg2rad(BORDER_SECOND):
+        return np.inf
+    mid = start + 0.5 * largest
+    bx = np.cos(mid) * u[0] + np.sin(mid) * vx
+    by = np.cos(mid) * u[1] + np.sin(mid) * vy
+    bz = np.cos(mid) * u[2] + np.sin(mid) * vz
+    line[0], line[1], line[2] = X[p, 0], X[p, 1], X[p, 2]
+    line[3] = ny * bz - nz * by  # normal × the bisector: both unit and orthogonal
+    line[4] = nz * bx - nx * bz
+    line[5] = nx * by - ny * bx
+    return 0.0
+
+
+@jit
+def median_ring_gap(X, normals, dn, dn_cnt, spacing, n_sample):
+    """The median, over about ``n_sample`` points spread through ``X`` (every
+    ``len(X) // n_sample``-th), of the widest empty angle (degrees) about each point among its
+    two-ring's points within ``BORDER_REACH`` cloud ``spacing``s, projected on its tangent
+    plane (``normals``): whether a sampling fills its tangent planes (below ``FILLED_GAP``), as
+    :func:`_border_gap` needs. 360 where fewer than two points are in reach.
+    """
+    n = X.shape[0]
+    if n < 3:
+        return 360.0
+    step = max(1, n // max(1, n_sample))
+    mark = np.zeros(n, dtype=np.int64)
+    idx = np.empty(MAX_RING, dtype=np.int64)
+    ang = np.empty(MAX_RING)
+    dist = np.empty(MAX_RING)
+    u = np.empty(3)
+    gaps = np.empty(n // step + 1)
+    g = 0
+    for p in range(0, n, step):
+        c = gather_rings(p, dn, dn_cnt, 2, mark, idx)
+        if c < 3:
+            gaps[g] = 360.0
+            g += 1
+            continue
+        for j in range(c):
+            dist[j] = np.sqrt(sq_dist(X, idx[j], X[p]))
+        nx, ny, nz = normals[p, 0], normals[p, 1], normals[p, 2]
+        any_perpendicular(nx, ny, nz, u)
+        vx, vy, vz = ny * u[2] - nz * u[1], nz * u[0] - nx * u[2], nx * u[1] - ny * u[0]
+        m = 0
+        for j in range(c):
+            if dist[j] > BORDER_REACH * spacing or dist[j] <= 0.0:
+                continue
+            q = idx[j]
+            dx, dy, dz = X[q, 0] - X[p, 0], X[q, 1] - X[p, 1], X[q, 2] - X[p, 2]
+            ang[m] = np.arctan2(dx * vx + dy * vy + dz * vz, dx * u[0] + dy * u[1] + dz * u[2])
+            m += 1
+        if m < 2:
+            gaps[g] = 360.0
+        else:
+            gaps[g] = np.rad2deg(_largest_gap(ang, m)[0])
+        g += 1
+    return np.median(gaps[:g])
 
 
 @jit
@@ -1234,7 +1379,7 @@ def _two_plane_sse(X, idx, c, side, c1, n1, c2, n2):
 
 @jit
 def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min_angle, width,
-             corner, bend, narrowed, rim):
+             corner, bend, narrowed, rim, filled):
     """Step 2 for every candidate: ``out[p]`` = edge distance / local spacing (inf: no edge),
     ``angle[p]`` = the fold of the fitted faces (degrees, 0-180, see ``MIN_ANGLE``; 0 where no
     edge),
@@ -1271,7 +1416,9 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     Where none of them finds one either and the two-ring holds two sheets, a thin wall's rim
     is tried (:func:`_fit_rim`, :func:`_rim_clear`: the fold reads 90°, no bend is measured);
     ``rim[p]``: whether ``p``'s fit is a rim's, whose line makes features but not the core
-    band (:func:`.simplify.boundary_flags`).
+    band (:func:`.simplify.boundary_flags`). Where no rim fits either and the sampling fills
+    its tangent planes (``filled``: :func:`median_ring_gap` below ``FILLED_GAP``), a border is
+    tried (:func:`_border_gap`: an empty angle about the point), a rim's kind for ``rim``.
 
     Beyond the paper, a second pass: a candidate whose two-plane fit finds no edge within
     ``width`` local spacings of it (none, or a farther one) is fitted with three planes
@@ -1299,6 +1446,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     qt = np.empty(3)
     mark3 = np.zeros(0, dtype=np.int64)  # the three-rings' marks, made where a rim is tried
     ring3 = np.empty(4 * MAX_RING, dtype=np.int64)
+    ang3 = np.empty(4 * MAX_RING)
     for p in range(n):
         bend[p] = np.nan
         narrowed[p] = False
@@ -1342,6 +1490,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
             idx[:c_whole] = whole[:c_whole]
             c = c_whole
             d = _fit_rim(X, idx, c, s, proj, sheet_n, line[p], across)
+            k = -1
             if d < np.inf:
                 if mark3.shape[0] == 0:
                     mark3 = np.zeros(n, dtype=np.int64)
@@ -1351,6 +1500,15 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
                     rim[p] = layers = True
                 else:
                     d = np.inf
+            if d == np.inf and filled:  # a border where no rim fits: an empty angle about p
+                if k < 0:
+                    if mark3.shape[0] == 0:
+                        mark3 = np.zeros(n, dtype=np.int64)
+                    k = gather_rings(p, dn, dn_cnt, FIT_RINGS + 1, mark3, ring3)
+                d = _border_gap(X, p, ring3, k, s, sheet_n, ang3, line[p])
+                if d < np.inf:
+                    angle[p] = 90.0
+                    rim[p] = layers = True
         # a farther line's bend is not measured: measured, far smooth folds stopped lending
         # and far soft ones became creases, F1 mixed (docs/measurements.md "Creases by the
         # quadric's excess error")

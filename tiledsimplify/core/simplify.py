@@ -38,6 +38,9 @@ from .zorder import distinct
 #: ``VmHWM`` less its RSS just before the call, peak reset by ``clear_refs``): 688 / 681 / 809 /
 #: 681 bytes a point. What the ``simplify`` command checks against the memory left.
 PEAK_BYTES_PER_POINT = 900
+#: points sampled for :func:`.edge_fit.median_ring_gap`, whether the sampling fills its tangent
+#: planes (the thin walls' border test, :func:`.edge_fit._border_gap`, needs it)
+GAP_SAMPLE = 512
 
 
 def _validate(xyz, frozen):
@@ -223,10 +226,12 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     narrowed = np.empty(m, dtype=bool)
     rim = np.empty(m, dtype=bool)
     width = float(options.edge_width)
+    spacing = float(median_spacing(Xu) if spacing is None else spacing)
+    gap = edge_fit.median_ring_gap(Xu, st.normals, st.dn, st.dn_cnt, spacing, GAP_SAMPLE)
+    filled = bool(gap < edge_fit.FILLED_GAP)  # the thin walls' border test needs it
     edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, fitted,
                       fitted_angle, line, local, float(options.edge_angle), width, corner,
-                      bend, narrowed, rim)
-    spacing = float(median_spacing(Xu) if spacing is None else spacing)
+                      bend, narrowed, rim, filled)
     _confirm_narrowed(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend,
                       narrowed)
     distance = np.empty(m) if distance_out is None else distance_out
