@@ -89,9 +89,8 @@ import numpy as np
 from ._jit import jit, jit_inline, jit_leaf
 from .boundary import deviation_at
 from .cell_grid import sq_dist
-from .linalg import (NO_MOMENTS, add_moments, any_perpendicular, covariance_about,
-                     moments_covariance, orient_canonical, smallest_axis, solve_small,
-                     sym3_eigvals, tangent_basis)
+from .linalg import (NO_MOMENTS, add_moments, covariance_about, moments_covariance,
+                     orient_canonical, smallest_axis, solve_small, sym3_eigvals, tangent_basis)
 
 #: default candidate threshold on the smoothed deviation (radians, ~4.6°)
 CANDIDATE = 0.08
@@ -145,7 +144,7 @@ MAX_MIXED = 0.1
 #: (docs/measurements.md "A face needs two points off its line"): boundary F1 geometric mean
 #: on the 24 scans +0.9 % (Fandisk's 0.767 -> 0.784 and 0.737 -> 0.759, plate_holes' noise-0.1
 #: scan 0.868 -> 0.901), on the 12 even parts -0.2 %; 3 trades recall for precision
-#: (angle_block's noise-0.2 scan, ADIS16480's noise-0.1 scan lose)
+#: (8 cases: ADIS16480's noise-0.1 scan 0.613 -> 0.597, plate_holes 0.872 -> 0.866)
 MIN_OFF = 2
 #: rounds of assign-and-refit in the two-plane fit
 ROUNDS = 4
@@ -265,8 +264,9 @@ BORDER_SECOND = 75.0
 BORDER_MIN = 6
 #: the border test needs a sampling that fills the tangent plane: a line scan leaves empty
 #: angles of 180° between its lines everywhere. Filled: the median empty angle of the points'
-#: two-rings (:func:`median_ring_gap`) below this many degrees (46-58° on the evenly sampled
-#: CAD parts, 177-184° on their line scans)
+#: two-rings (:func:`median_ring_gap`) below this many degrees: 52-60° on the 12 evenly
+#: sampled CAD parts of the quality cases, 177-181° on their 24 line scans; the Bunny 53°,
+#: Autzen's LiDAR 82°, the Bunny's ten range scans 110°
 FILLED_GAP = 90.0
 #: a crease whose faces, each fitted by a parabola across its line, fold by less than this
 #: there (degrees) is a fillet's tangent edge, not a crease (:func:`_fold_at_line`)
@@ -570,30 +570,30 @@ def _largest_gap(ang, m):
 
 
 @jit
-def _border_gap(X, p, ring, k, spacing, normal, ang, line):
+def _border_gap(X, p, ring, k, spacing, normal, ang, line, u, v):
     """A thin wall's border at ``X[p]``: 0 with the border's line through the point into
     ``line`` where ``ring[:k]`` (its three-ring) leaves an empty angle about it, ``inf``
     where it does not. The points within ``LAYER_GAP_MAX`` local spacings (``spacing``) of
     the sheets' plane (``normal``: both sheets, a hole passes through both) and within
     ``BORDER_REACH`` of the point, projected on that plane, must leave one empty angle of
     ``BORDER_GAP`` or more and no other of ``BORDER_SECOND``; the line runs in the plane across
-    the empty angle's bisector. ``ang``: work array of length ``k`` or more.
+    the empty angle's bisector. ``ang``: work array of length ``k`` or more; ``u``, ``v``:
+    work vectors (the plane's basis).
 
     Beyond the paper. A rim (:func:`_fit_rim`) needs the whole two-ring to one side of the
     point, both sheets ending together within a spacing. The empty angle about a point is the
     classic border test of an open surface's sampling (PCL's boundary estimation takes 90°):
-    inside the tray's faces, evenly sampled, the widest is 46-78° (10th-90th percentile); it
-    exceeds 100° at 85 % of the points within half a spacing of an edge. Here it finds 90
-    more of the tray's rim points (402, all within a spacing of an edge), along its outer rim
+    inside the tray's faces, evenly sampled, the widest is 48-78° (10th-90th percentile); it
+    exceeds 100° at 85 % of the points within half a spacing of an edge (both measured on the
+    point's own sheet, docs/measurements.md "A thin wall's border"). In ``simplify_points``
+    it adds 99 to the tray's 303 rim fits, all 402 within a spacing of an edge, along its outer rim
     and slot where :func:`_fit_rim`'s tests fail: F1 0.682 -> 0.713. Not its small holes (3.8
     spacings across at 20k points): a hole's wall projects onto its circle, whose points fill
     all but some 100° about a point on it. On line scans the angle reads 180° everywhere:
     :func:`localise` tries it only on samplings that fill the plane (``FILLED_GAP``).
     """
     nx, ny, nz = normal[0], normal[1], normal[2]
-    u = np.empty(3)
-    any_perpendicular(nx, ny, nz, u)
-    vx, vy, vz = ny * u[2] - nz * u[1], nz * u[0] - nx * u[2], nx * u[1] - ny * u[0]
+    tangent_basis(normal, u, v)
     r2 = (BORDER_REACH * spacing) ** 2
     hmax = LAYER_GAP_MAX * spacing
     m = 0
@@ -609,7 +609,7 @@ def _border_gap(X, p, ring, k, spacing, normal, ang, line):
         t2 = tx * tx + ty * ty + tz * tz
         if t2 > r2 or t2 <= 0.0:
             continue
-        ang[m] = np.arctan2(tx * vx + ty * vy + tz * vz, tx * u[0] + ty * u[1] + tz * u[2])
+        ang[m] = np.arctan2(tx * v[0] + ty * v[1] + tz * v[2], tx * u[0] + ty * u[1] + tz * u[2])
         m += 1
     if m < BORDER_MIN:
         return np.inf
@@ -617,9 +617,9 @@ def _border_gap(X, p, ring, k, spacing, normal, ang, line):
     if largest < np.deg2rad(BORDER_GAP) or second >= np.deg2rad(BORDER_SECOND):
         return np.inf
     mid = start + 0.5 * largest
-    bx = np.cos(mid) * u[0] + np.sin(mid) * vx
-    by = np.cos(mid) * u[1] + np.sin(mid) * vy
-    bz = np.cos(mid) * u[2] + np.sin(mid) * vz
+    bx = np.cos(mid) * u[0] + np.sin(mid) * v[0]
+    by = np.cos(mid) * u[1] + np.sin(mid) * v[1]
+    bz = np.cos(mid) * u[2] + np.sin(mid) * v[2]
     line[0], line[1], line[2] = X[p, 0], X[p, 1], X[p, 2]
     line[3] = ny * bz - nz * by  # normal × the bisector: both unit and orthogonal
     line[4] = nz * bx - nx * bz
@@ -642,8 +642,9 @@ def median_ring_gap(X, normals, dn, dn_cnt, spacing, n_sample):
     mark = np.zeros(n, dtype=np.int64)
     idx = np.empty(MAX_RING, dtype=np.int64)
     ang = np.empty(MAX_RING)
-    dist = np.empty(MAX_RING)
     u = np.empty(3)
+    v = np.empty(3)
+    r2 = (BORDER_REACH * spacing) ** 2
     gaps = np.empty(n // step + 1)
     g = 0
     for p in range(0, n, step):
@@ -652,18 +653,16 @@ def median_ring_gap(X, normals, dn, dn_cnt, spacing, n_sample):
             gaps[g] = 360.0
             g += 1
             continue
-        for j in range(c):
-            dist[j] = np.sqrt(sq_dist(X, idx[j], X[p]))
-        nx, ny, nz = normals[p, 0], normals[p, 1], normals[p, 2]
-        any_perpendicular(nx, ny, nz, u)
-        vx, vy, vz = ny * u[2] - nz * u[1], nz * u[0] - nx * u[2], nx * u[1] - ny * u[0]
+        tangent_basis(normals[p], u, v)
         m = 0
         for j in range(c):
-            if dist[j] > BORDER_REACH * spacing or dist[j] <= 0.0:
-                continue
             q = idx[j]
+            d2 = sq_dist(X, q, X[p])
+            if d2 > r2 or d2 <= 0.0:
+                continue
             dx, dy, dz = X[q, 0] - X[p, 0], X[q, 1] - X[p, 1], X[q, 2] - X[p, 2]
-            ang[m] = np.arctan2(dx * vx + dy * vy + dz * vz, dx * u[0] + dy * u[1] + dz * u[2])
+            ang[m] = np.arctan2(dx * v[0] + dy * v[1] + dz * v[2],
+                                dx * u[0] + dy * u[1] + dz * u[2])
             m += 1
         if m < 2:
             gaps[g] = 360.0
@@ -1447,6 +1446,8 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     mark3 = np.zeros(0, dtype=np.int64)  # the three-rings' marks, made where a rim is tried
     ring3 = np.empty(4 * MAX_RING, dtype=np.int64)
     ang3 = np.empty(4 * MAX_RING)
+    bu = np.empty(3)  # the border's plane basis
+    bv = np.empty(3)
     for p in range(n):
         bend[p] = np.nan
         narrowed[p] = False
@@ -1490,22 +1491,14 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
             idx[:c_whole] = whole[:c_whole]
             c = c_whole
             d = _fit_rim(X, idx, c, s, proj, sheet_n, line[p], across)
-            k = -1
-            if d < np.inf:
+            if d < np.inf or filled:  # both tests read the three-ring
                 if mark3.shape[0] == 0:
                     mark3 = np.zeros(n, dtype=np.int64)
                 k = gather_rings(p, dn, dn_cnt, FIT_RINGS + 1, mark3, ring3)
-                if _rim_clear(X, p, ring3, k, d, s, across, sheet_n):
-                    angle[p] = 90.0
-                    rim[p] = layers = True
-                else:
+                if d < np.inf and not _rim_clear(X, p, ring3, k, d, s, across, sheet_n):
                     d = np.inf
-            if d == np.inf and filled:  # a border where no rim fits: an empty angle about p
-                if k < 0:
-                    if mark3.shape[0] == 0:
-                        mark3 = np.zeros(n, dtype=np.int64)
-                    k = gather_rings(p, dn, dn_cnt, FIT_RINGS + 1, mark3, ring3)
-                d = _border_gap(X, p, ring3, k, s, sheet_n, ang3, line[p])
+                if d == np.inf and filled:  # a border where no rim fits: an empty angle
+                    d = _border_gap(X, p, ring3, k, s, sheet_n, ang3, line[p], bu, bv)
                 if d < np.inf:
                     angle[p] = 90.0
                     rim[p] = layers = True
