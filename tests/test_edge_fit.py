@@ -128,7 +128,8 @@ def test_a_face_needs_two_points_off_its_line(monkeypatch):
     def fit(edge_distance):
         work = [np.empty(3) for _ in range(5)]
         return edge_distance(X, normals, np.arange(c), c, np.empty(c, dtype=np.int64), *work,
-                             1.0, np.empty(c), np.empty(6), np.cos(np.deg2rad(edge_fit.MIN_ANGLE)))
+                             1.0, np.empty(c), np.empty(6), np.cos(np.deg2rad(edge_fit.MIN_ANGLE)),
+                             np.empty(c, dtype=np.int64))
 
     assert edge_fit.MIN_OFF == 2
     assert fit(edge_fit.edge_distance) == (np.inf, 0.0)
@@ -240,7 +241,8 @@ def test_sweep_seed_is_the_best_line_split(seed):
     idx = np.arange(c)
     side = np.full(c, -1, np.int64)
     frame = [np.empty(3) for _ in range(3)]
-    assert edge_fit._seed_by_sweep(X, idx, c, side, np.empty(c), *frame, np.empty(3))
+    assert edge_fit._seed_by_sweep(X, idx, c, side, np.empty(c), *frame, np.empty(3),
+                                   np.empty(c, np.int64))
     assert set(np.unique(side)) == {0, 1}
     least = max(edge_fit.MIN_SIDE, int(np.ceil(edge_fit.SWEEP_SIDE * c)))
     assert min(np.sum(side == 0), np.sum(side == 1)) >= least
@@ -283,11 +285,43 @@ def test_sweep_seed_separates_the_faces_of_a_ridge():
     X[0] = [0.0, 0.0, 0.0]  # the point itself on the ridge
     side = np.empty(30, np.int64)
     frame = [np.empty(3) for _ in range(3)]
-    assert edge_fit._seed_by_sweep(X, np.arange(30), 30, side, np.empty(30), *frame, np.empty(3))
+    assert edge_fit._seed_by_sweep(X, np.arange(30), 30, side, np.empty(30), *frame, np.empty(3),
+                                   np.empty(30, np.int64))
     clear = np.abs(X[:, 0]) > 0.05
     left = side[clear & (X[:, 0] < 0)]
     right = side[clear & (X[:, 0] > 0)]
     assert len(set(left)) == 1 and len(set(right)) == 1 and left[0] != right[0]
+
+
+def test_the_fits_helpers_equal_numpys_and_their_single_forms():
+    """The sort, median and two-plane fit that replaced ``np.argsort``, ``np.median`` and two
+    calls of ``_plane_fit`` in the edge fits (speed, not results): the same values to the
+    last bit, equal values sorted in their positions' order."""
+    rng = np.random.default_rng(11)
+    for c in (1, 2, 3, 8, 31, edge_fit.MAX_RING + 1):
+        a = np.round(rng.normal(size=c + 4), 1)  # many equal values
+        order = np.full(c + 4, -1, np.int64)
+        edge_fit._sort_order(a, c, order)
+        assert list(order[:c]) == list(np.argsort(a[:c], kind="stable"))
+        b = a.copy()
+        assert edge_fit._median_in_place(b, c) == np.median(a[:c])
+        assert list(b[:c]) == sorted(a[:c]) and list(b[c:]) == list(a[c:])
+    X = rng.normal(size=(60, 3)) * [1.0, 1.0, 0.1] + rng.normal(size=3) * 10
+    for k0 in (2, 3, 17, 30):
+        idx = rng.permutation(60)[:33]
+        side = (np.arange(33) >= k0).astype(np.int64)
+        rng.shuffle(side)
+        both = [np.empty(3) for _ in range(5)]  # c1, n1, c2, n2, work
+        k0_, k1_, rms0, spread0 = edge_fit._plane_fits(X, idx, 33, side, *both)
+        assert (k0_, k1_) == (k0, 33 - k0)
+        if k0 < edge_fit.MIN_SIDE:
+            continue
+        for which, centre, normal, rms, spread in ((0, both[0], both[1], rms0, spread0),
+                                                   (1, both[2], both[3], *both[4][:2])):
+            alone = [np.empty(3) for _ in range(3)]
+            assert edge_fit._plane_fit(X, idx, 33, side, which, *alone) == (k0, 33 - k0)[which]
+            assert list(alone[0]) == list(centre) and list(alone[1]) == list(normal)
+            assert (alone[2][0], alone[2][1]) == (rms, spread)
 
 
 @pytest.mark.parametrize("noise", [0.1, 0.2])
@@ -1015,6 +1049,7 @@ def _whole_ring_fits(X, st, nn, points):
     mark = np.zeros(len(X), np.int64)
     idx, side = np.empty(edge_fit.MAX_RING + 1, np.int64), np.empty(edge_fit.MAX_RING + 1, np.int64)
     proj, line = np.empty(edge_fit.MAX_RING + 1), np.empty(6)
+    order = np.empty(edge_fit.MAX_RING + 1, np.int64)
     c1, n1, c2, n2, work = (np.empty(3) for _ in range(5))
     max_cos = np.cos(np.deg2rad(edge_fit.MIN_ANGLE))
     out = np.empty(len(points))
@@ -1024,7 +1059,7 @@ def _whole_ring_fits(X, st, nn, points):
         s = np.median(nn[idx[:c]])
         c = edge_fit.own_layer(X, idx, c, s, proj, c1, work)
         d, _ = edge_fit.edge_distance(X, st.normals, idx, c, side, c1, n1, c2, n2, work, s,
-                                      proj, line, max_cos)
+                                      proj, line, max_cos, order)
         out[i] = d / s
     return out
 

@@ -300,7 +300,7 @@ def near_part(X, idx, c, radius):
     return m
 
 
-@jit
+@jit_leaf
 def _two_means(h, c):
     """A 1-D 2-means of ``h[:c]`` (Lloyd's rounds from the midrange, at most 8):
     ``(ok, cut, m0, m1, k0, k1, v0, v1)`` — the cut, each layer's mean, count and sum of
@@ -672,7 +672,7 @@ def median_ring_gap(X, normals, dn, dn_cnt, spacing, n_sample):
     return np.median(gaps[:g])
 
 
-@jit
+@jit_leaf
 def own_layer(X, idx, c, spacing, h, normal, work):
     """The points of ``idx[:c]`` in ``idx[0]``'s own layer, where they lie in two: compacts
     ``idx`` (``idx[0]`` stays first) and returns the new count; ``c`` where they do not.
@@ -720,6 +720,24 @@ def own_layer(X, idx, c, spacing, h, normal, work):
             idx[m] = idx[j]
             m += 1
     return m
+
+
+@jit_leaf
+def _median_in_place(a, c):
+    """``np.median(a[:c])`` (``c`` >= 1, no NaN), sorting ``a[:c]`` in place (an insertion
+    sort: a two-ring's values, without the copy ``np.median`` makes): the middle value, or the
+    mean ``(a + b) / 2`` of the middle two as numpy's."""
+    for i in range(1, c):
+        v = a[i]
+        j = i - 1
+        while j >= 0 and a[j] > v:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = v
+    half = c >> 1
+    if c & 1 == 0:
+        return (a[half - 1] + a[half]) / 2
+    return a[half]
 
 
 @jit_leaf
@@ -811,6 +829,62 @@ def _plane_fit(X, idx, c, side, which, centre, normal, work):
     work[0] = np.sqrt(max(l0, 0.0) / k)  # RMS distance of the points to their plane
     work[1] = np.sqrt(max(l1, 0.0) / k)  # their RMS spread across their principal axis
     return k
+
+
+@jit_leaf
+def _plane_fits(X, idx, c, side, c1, n1, c2, n2, work):
+    """:func:`_plane_fit` of sides 0 and 1 at once, into ``c1, n1`` and ``c2, n2``: one pass
+    over the points for both sides' means and one for their scatters, each side's sums taken
+    in the same order as alone (so the same planes to the last bit). Returns ``(k0, k1, rms0,
+    spread0)``: the sides' counts and side 0's RMS and spread; side 1's are left in ``work[0]``
+    and ``work[1]``. Where a side holds fewer than ``MIN_SIDE`` points, no plane is fitted."""
+    k0 = k1 = 0
+    sx0 = sy0 = sz0 = sx1 = sy1 = sz1 = 0.0
+    for j in range(c):
+        q = idx[j]
+        if side[j] == 0:
+            sx0 += X[q, 0]
+            sy0 += X[q, 1]
+            sz0 += X[q, 2]
+            k0 += 1
+        elif side[j] == 1:
+            sx1 += X[q, 0]
+            sy1 += X[q, 1]
+            sz1 += X[q, 2]
+            k1 += 1
+    if k0 < MIN_SIDE or k1 < MIN_SIDE:
+        return k0, k1, 0.0, 0.0
+    mx0, my0, mz0 = sx0 / k0, sy0 / k0, sz0 / k0
+    mx1, my1, mz1 = sx1 / k1, sy1 / k1, sz1 / k1
+    a00 = a01 = a02 = a11 = a12 = a22 = 0.0
+    b00 = b01 = b02 = b11 = b12 = b22 = 0.0
+    for j in range(c):
+        q = idx[j]
+        if side[j] == 0:
+            x, y, z = X[q, 0] - mx0, X[q, 1] - my0, X[q, 2] - mz0
+            a00 += x * x
+            a01 += x * y
+            a02 += x * z
+            a11 += y * y
+            a12 += y * z
+            a22 += z * z
+        elif side[j] == 1:
+            x, y, z = X[q, 0] - mx1, X[q, 1] - my1, X[q, 2] - mz1
+            b00 += x * x
+            b01 += x * y
+            b02 += x * z
+            b11 += y * y
+            b12 += y * z
+            b22 += z * z
+    l0, l1, _ = smallest_axis(a00, a01, a02, a11, a12, a22, n1, work)
+    c1[0], c1[1], c1[2] = mx0, my0, mz0
+    rms0 = np.sqrt(max(l0, 0.0) / k0)
+    spread0 = np.sqrt(max(l1, 0.0) / k0)
+    l0, l1, _ = smallest_axis(b00, b01, b02, b11, b12, b22, n2, work)
+    c2[0], c2[1], c2[2] = mx1, my1, mz1
+    work[0] = np.sqrt(max(l0, 0.0) / k1)
+    work[1] = np.sqrt(max(l1, 0.0) / k1)
+    return k0, k1, rms0, spread0
 
 
 @jit_leaf
@@ -913,13 +987,14 @@ def _scatter_floor(a00, a01, a02, a11, a12, a22):
     return x, trace
 
 
-@jit
-def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work):
+@jit_leaf
+def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work, order):
     """Initial split by a straight line in the neighbours' mean plane (where a sharp edge
     projects): of ``NDIR`` directions and every offset, the one whose two halves lie closest
     to two planes (least total squared plane distance, from running moments in sorted order),
-    each half holding ``SWEEP_SIDE`` of the points or more. ``idx[0]`` is the point itself.
-    Returns False if ``c`` is too small for two such halves."""
+    each half holding ``SWEEP_SIDE`` of the points or more. ``idx[0]`` is the point itself;
+    ``order``: int64 work array of length ``c`` or more (:func:`_sort_order`). Returns False if
+    ``c`` is too small for two such halves."""
     least = max(MIN_SIDE, int(np.ceil(SWEEP_SIDE * c)))
     if c < 2 * least:
         return False
@@ -935,7 +1010,7 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work):
     best_k = least
     for d in range(NDIR):
         _project(X, idx, c, p, t1, t2, np.pi * d / NDIR, proj)
-        order = np.argsort(proj[:c])
+        _sort_order(proj, c, order)
         left = NO_MOMENTS
         for k in range(1, c - least + 1):
             left = add_moments(left, X, idx[order[k - 1]], px, py, pz)
@@ -946,19 +1021,38 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work):
                      total[6] - left[6], total[7] - left[7], total[8] - left[8])
             scatter_l = _scatter(left, k)
             scatter_r = _scatter(right, c - k)
-            # most splits cannot beat the best: a bound without eigenvalues rules them out
-            low_l, trace_l = _scatter_floor(*scatter_l)
-            low_r, trace_r = _scatter_floor(*scatter_r)
-            if low_l + low_r >= best + FLOOR_MARGIN * (trace_l + trace_r):
+            # most splits cannot beat the best: a bound without eigenvalues rules them out,
+            # often the left half's alone (the right's bound is not negative)
+            bar = best + FLOOR_MARGIN * (max(scatter_l[0] + scatter_l[3] + scatter_l[5], 0.0)
+                                         + max(scatter_r[0] + scatter_r[3] + scatter_r[5], 0.0))
+            low_l, _ = _scatter_floor(*scatter_l)
+            if low_l >= bar:
+                continue
+            low_r, _ = _scatter_floor(*scatter_r)
+            if low_l + low_r >= bar:
                 continue
             sse = _smallest_scatter(*scatter_l) + _smallest_scatter(*scatter_r)
             if sse < best:
                 best, best_d, best_k = sse, d, k
     _project(X, idx, c, p, t1, t2, np.pi * best_d / NDIR, proj)
-    order = np.argsort(proj[:c])
+    _sort_order(proj, c, order)
     for i in range(c):
         side[order[i]] = 0 if i < best_k else 1
     return True
+
+
+@jit_leaf
+def _sort_order(a, c, order):
+    """``order[:c]``: the positions of ``a[:c]`` in ascending order, equal values in their
+    positions' order (an insertion sort: the sweep's two-rings hold at most ``MAX_RING`` + 1
+    points, and ``np.argsort`` allocated its result for each of them)."""
+    for i in range(c):
+        v = a[i]
+        j = i - 1
+        while j >= 0 and a[order[j]] > v:
+            order[j + 1] = order[j]
+            j -= 1
+        order[j + 1] = i
 
 
 @jit_leaf
@@ -971,25 +1065,25 @@ def _project(X, idx, c, p, t1, t2, angle, proj):
         proj[j] = (X[q, 0] - X[p, 0]) * dx + (X[q, 1] - X[p, 1]) * dy + (X[q, 2] - X[p, 2]) * dz
 
 
-@jit
+@jit_leaf
 def edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, spacing, proj, line,
-                  max_cos):
+                  max_cos, order):
     """Step 2: ``(distance, angle)`` — the distance from ``idx[0]`` to the edge of a two-plane
     fit of ``idx[:c]`` and the faces' fold there (degrees, 0-180, see ``MIN_ANGLE``; planes
     whose angle has a cosine above ``max_cos`` in absolute value give no edge).
 
     ``normals`` are one-ring normals (sharper across the edge than smoothed ones). The fit
     starts from the normal seeds; if that fails, once more from the line sweep
-    (:func:`_seed_by_sweep`). ``proj`` is a work array of length ``c`` or more. The distance
-    is ``inf`` when the points are not two planes meeting at a sharp edge (see
-    :func:`_fit_edge`); otherwise ``line`` holds the edge (:func:`_edge_line`).
+    (:func:`_seed_by_sweep`). ``proj`` and ``order`` (int64) are work arrays of length ``c`` or
+    more. The distance is ``inf`` when the points are not two planes meeting at a sharp edge
+    (see :func:`_fit_edge`); otherwise ``line`` holds the edge (:func:`_edge_line`).
     """
     _seed_by_normals(normals, idx, c, side)
     d, angle = _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos)
     if d < np.inf:
         return d, angle
     # c1, n1, c2 serve as the sweep's frame (normal, t1, t2): the fit overwrites them anyway
-    if not _seed_by_sweep(X, idx, c, side, proj, c1, n1, c2, work):
+    if not _seed_by_sweep(X, idx, c, side, proj, c1, n1, c2, work, order):
         return np.inf, 0.0
     return _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos)
 
@@ -1031,7 +1125,7 @@ def _line_distance(X, p, line):
     return _point_line_distance(X[p], line)
 
 
-@jit
+@jit_leaf
 def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
     """Two-plane k-means from the split ``side``, then ``(distance, angle)``: the distance from
     ``idx[0]`` to the planes' line of intersection and the faces' fold there (degrees, 0-180):
@@ -1054,10 +1148,11 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
     """
     max_rms = MAX_RMS * spacing
     p = idx[0]
+    settled = False  # the last round's planes fit the sides as they are now
+    rms0 = spread0 = 0.0
     for _ in range(ROUNDS):
-        if _plane_fit(X, idx, c, side, 0, c1, n1, work) < MIN_SIDE:
-            return np.inf, 0.0
-        if _plane_fit(X, idx, c, side, 1, c2, n2, work) < MIN_SIDE:
+        k0, k1, rms0, spread0 = _plane_fits(X, idx, c, side, c1, n1, c2, n2, work)
+        if k0 < MIN_SIDE or k1 < MIN_SIDE:
             return np.inf, 0.0
         changed = False
         for j in range(c):
@@ -1067,13 +1162,15 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
                 side[j] = s
                 changed = True
         if not changed:
+            settled = True
             break
+    if not settled:  # the sides moved in the last round: their planes again
+        k0, k1, rms0, spread0 = _plane_fits(X, idx, c, side, c1, n1, c2, n2, work)
+        if k0 < MIN_SIDE or k1 < MIN_SIDE:
+            return np.inf, 0.0
+    # side 1's RMS and spread are in work
     min_spread = MIN_SPREAD * spacing
-    if (_plane_fit(X, idx, c, side, 0, c1, n1, work) < MIN_SIDE or work[0] > max_rms
-            or work[1] < min_spread):
-        return np.inf, 0.0
-    if (_plane_fit(X, idx, c, side, 1, c2, n2, work) < MIN_SIDE or work[0] > max_rms
-            or work[1] < min_spread):
+    if rms0 > max_rms or spread0 < min_spread or work[0] > max_rms or work[1] < min_spread:
         return np.inf, 0.0
     cs = n1[0] * n2[0] + n1[1] * n2[1] + n1[2] * n2[2]
     if abs(cs) > max_cos:
@@ -1433,6 +1530,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
     side = np.empty(MAX_RING + 1, dtype=np.int64)
     vals = np.empty(MAX_RING + 1)
     proj = np.empty(MAX_RING + 1)
+    order = np.empty(MAX_RING + 1, dtype=np.int64)  # the sweep's sort
     c1 = np.empty(3)
     c2 = np.empty(3)
     n1 = np.empty(3)
@@ -1462,7 +1560,7 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         c = 1 + gather_rings(p, dn, dn_cnt, FIT_RINGS, mark, idx[1:])
         for j in range(c):
             vals[j] = nn[idx[j]]
-        s = np.median(vals[:c])
+        s = _median_in_place(vals, c)
         local[p] = s
         if s <= 0.0:
             continue
@@ -1471,13 +1569,13 @@ def localise(X, normals, dn, dn_cnt, nn, candidate, out, angle, line, local, min
         c = own_layer(X, idx, c, s, proj, sheet_n, work)  # a thin wall: the point's own sheet
         sheets = c < c_whole
         d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s, proj,
-                                    line[p], max_cos)
+                                    line[p], max_cos, order)
         if d == np.inf:  # a scan's two-ring reaching too far across its lines: the near part
             m = near_part(X, idx, c, NEAR_RING * s)
             if MIN_SIDE * 2 <= m < c:
                 c = own_layer(X, idx, m, s, proj, c1, work)
                 d, angle[p] = edge_distance(X, normals, idx, c, side, c1, n1, c2, n2, work, s,
-                                            proj, line[p], max_cos)
+                                            proj, line[p], max_cos, order)
                 narrowed[p] = d < np.inf
         layers = False  # a step's or a rim's fit: no bend measured
         if d == np.inf:  # a step lower than the spacing: its own two-ring, near the point
