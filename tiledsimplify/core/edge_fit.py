@@ -824,11 +824,19 @@ def _plane_fit(X, idx, c, side, which, centre, normal, work):
             c11 += y * y
             c12 += y * z
             c22 += z * z
+    work[0], work[1] = _plane_of(c00, c01, c02, c11, c12, c22, k, mx, my, mz, centre, normal,
+                                 work)
+    return k
+
+
+@jit_leaf
+def _plane_of(c00, c01, c02, c11, c12, c22, k, mx, my, mz, centre, normal, work):
+    """The PCA plane of ``k`` points with mean ``(mx, my, mz)`` and scatter ``c..`` into
+    ``centre`` and ``normal`` (``work``: scratch); returns the points' RMS distance to it and
+    their RMS spread across their principal axis."""
     l0, l1, _ = smallest_axis(c00, c01, c02, c11, c12, c22, normal, work)
     centre[0], centre[1], centre[2] = mx, my, mz
-    work[0] = np.sqrt(max(l0, 0.0) / k)  # RMS distance of the points to their plane
-    work[1] = np.sqrt(max(l1, 0.0) / k)  # their RMS spread across their principal axis
-    return k
+    return np.sqrt(max(l0, 0.0) / k), np.sqrt(max(l1, 0.0) / k)
 
 
 @jit_leaf
@@ -876,14 +884,8 @@ def _plane_fits(X, idx, c, side, c1, n1, c2, n2, work):
             b11 += y * y
             b12 += y * z
             b22 += z * z
-    l0, l1, _ = smallest_axis(a00, a01, a02, a11, a12, a22, n1, work)
-    c1[0], c1[1], c1[2] = mx0, my0, mz0
-    rms0 = np.sqrt(max(l0, 0.0) / k0)
-    spread0 = np.sqrt(max(l1, 0.0) / k0)
-    l0, l1, _ = smallest_axis(b00, b01, b02, b11, b12, b22, n2, work)
-    c2[0], c2[1], c2[2] = mx1, my1, mz1
-    work[0] = np.sqrt(max(l0, 0.0) / k1)
-    work[1] = np.sqrt(max(l1, 0.0) / k1)
+    rms0, spread0 = _plane_of(a00, a01, a02, a11, a12, a22, k0, mx0, my0, mz0, c1, n1, work)
+    work[0], work[1] = _plane_of(b00, b01, b02, b11, b12, b22, k1, mx1, my1, mz1, c2, n2, work)
     return k0, k1, rms0, spread0
 
 
