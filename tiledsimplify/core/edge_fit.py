@@ -545,17 +545,24 @@ def _rim_clear(X, p, ring, k, d, spacing, out_dir, normal):
 
 
 @jit_leaf
+def _sort_in_place(a, m):
+    """Sorts ``a[:m]`` in place, by insertion: the few dozen values of a two- or three-ring,
+    without the copy ``np.sort`` or ``np.median`` makes, and quicker to compile."""
+    for i in range(1, m):
+        v = a[i]
+        j = i - 1
+        while j >= 0 and a[j] > v:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = v
+
+
+@jit_leaf
 def _largest_gap(ang, m):
     """``(largest, second, start)``: the two widest empty angles between the angles
-    ``ang[:m]`` (radians, m >= 2; sorted here, in place, by insertion: a few dozen, and
-    quicker to compile than ``np.sort``), the widest's start angle."""
-    for i in range(1, m):
-        a = ang[i]
-        j = i - 1
-        while j >= 0 and ang[j] > a:
-            ang[j + 1] = ang[j]
-            j -= 1
-        ang[j + 1] = a
+    ``ang[:m]`` (radians, m >= 2; sorted here, in place: :func:`_sort_in_place`), the widest's
+    start angle."""
+    _sort_in_place(ang, m)
     largest = second = 0.0
     start = 0.0
     for i in range(m):
@@ -724,16 +731,10 @@ def own_layer(X, idx, c, spacing, h, normal, work):
 
 @jit_leaf
 def _median_in_place(a, c):
-    """``np.median(a[:c])`` (``c`` >= 1, no NaN), sorting ``a[:c]`` in place (an insertion
-    sort: a two-ring's values, without the copy ``np.median`` makes): the middle value, or the
-    mean ``(a + b) / 2`` of the middle two as numpy's."""
-    for i in range(1, c):
-        v = a[i]
-        j = i - 1
-        while j >= 0 and a[j] > v:
-            a[j + 1] = a[j]
-            j -= 1
-        a[j + 1] = v
+    """``np.median(a[:c])`` (``c`` >= 1, no NaN), sorting ``a[:c]`` in place
+    (:func:`_sort_in_place`): the middle value, or the mean ``(a + b) / 2`` of the middle two
+    as numpy's."""
+    _sort_in_place(a, c)
     half = c >> 1
     if c & 1 == 0:
         return (a[half - 1] + a[half]) / 2
@@ -1150,7 +1151,7 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
     """
     max_rms = MAX_RMS * spacing
     p = idx[0]
-    settled = False  # the last round's planes fit the sides as they are now
+    changed = True  # False: the last round's planes fit the sides as they are now
     rms0 = spread0 = 0.0
     for _ in range(ROUNDS):
         k0, k1, rms0, spread0 = _plane_fits(X, idx, c, side, c1, n1, c2, n2, work)
@@ -1164,9 +1165,8 @@ def _fit_edge(X, idx, c, side, c1, n1, c2, n2, work, spacing, line, max_cos):
                 side[j] = s
                 changed = True
         if not changed:
-            settled = True
             break
-    if not settled:  # the sides moved in the last round: their planes again
+    if changed:  # the sides moved in the last round: their planes again
         k0, k1, rms0, spread0 = _plane_fits(X, idx, c, side, c1, n1, c2, n2, work)
         if k0 < MIN_SIDE or k1 < MIN_SIDE:
             return np.inf, 0.0
