@@ -997,7 +997,15 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work, order):
     to two planes (least total squared plane distance, from running moments in sorted order),
     each half holding ``SWEEP_SIDE`` of the points or more. ``idx[0]`` is the point itself;
     ``order``: int64 work array of length ``c`` or more (:func:`_sort_order`). Returns False if
-    ``c`` is too small for two such halves."""
+    ``c`` is too small for two such halves.
+
+    A direction's sweep stops once the left half's lower bound (:func:`_scatter_floor`) clears
+    the best so far by ``FLOOR_MARGIN`` of the whole two-ring's trace: the left half only
+    gains points, its scatter matrix only grows (in the positive semi-definite order) and its
+    least eigenvalue with it, so no later split of that direction could be chosen. The margin
+    covers the rounding of every split's eigenvalues, whose halves' traces sum to at most the
+    whole's. The split is the same; on lone-star's failed fits this skips 32 % of the splits
+    (6.5 of 20.5 million, docs/measurements.md "The line sweep stops early")."""
     least = max(MIN_SIDE, int(np.ceil(SWEEP_SIDE * c)))
     if c < 2 * least:
         return False
@@ -1008,6 +1016,10 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work, order):
         total = add_moments(total, X, idx[j], px, py, pz)
     smallest_axis(*moments_covariance(total, c - 1), normal, work)  # the mean plane
     tangent_basis(normal, t1, t2)
+    whole = _scatter(total, c)
+    # no split's two halves scatter more than the whole two-ring (their traces sum to its
+    # trace less the scatter between the halves' means): a margin for every split at once
+    margin = FLOOR_MARGIN * max(whole[0] + whole[3] + whole[5], 0.0)
     best = np.inf
     best_d = 0
     best_k = least
@@ -1029,6 +1041,8 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work, order):
             bar = best + FLOOR_MARGIN * (max(scatter_l[0] + scatter_l[3] + scatter_l[5], 0.0)
                                          + max(scatter_r[0] + scatter_r[3] + scatter_r[5], 0.0))
             low_l, _ = _scatter_floor(*scatter_l)
+            if low_l >= best + margin:
+                break  # the left half only grows from here, and its least eigenvalue with it
             if low_l >= bar:
                 continue
             low_r, _ = _scatter_floor(*scatter_r)
