@@ -957,7 +957,7 @@ FLOOR_STEPS = 2
 
 @jit
 def _scatter_floor(a00, a01, a02, a11, a12, a22):
-    """A lower bound on :func:`_smallest_scatter` without eigenvalues, and the scatter's trace.
+    """A lower bound on :func:`_smallest_scatter` without eigenvalues.
 
     ``λ0`` is the least root of the characteristic polynomial ``p(λ) = det − M λ + T λ² − λ³``
     (``T`` the trace, ``M`` the sum of the principal 2x2 minors). On ``[0, λ0]`` it is
@@ -979,7 +979,7 @@ def _scatter_floor(a00, a01, a02, a11, a12, a22):
     det = a00 * m00 - a01 * (a01 * a22 - a12 * a02) + a02 * (a01 * a12 - a11 * a02)
     trace = a00 + a11 + a22
     if det <= 0.0 or not minors > 1e-6 * trace * trace:
-        return 0.0, max(trace, 0.0)
+        return 0.0
     x = det / minors
     for _ in range(FLOOR_STEPS):
         value = det - x * (minors - x * (trace - x))
@@ -987,7 +987,7 @@ def _scatter_floor(a00, a01, a02, a11, a12, a22):
         if not (value > 0.0 and slope > 0.0):
             break
         x += value / slope
-    return x, trace
+    return x
 
 
 @jit_leaf
@@ -1040,12 +1040,12 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work, order):
             # often the left half's alone (the right's bound is not negative)
             bar = best + FLOOR_MARGIN * (max(scatter_l[0] + scatter_l[3] + scatter_l[5], 0.0)
                                          + max(scatter_r[0] + scatter_r[3] + scatter_r[5], 0.0))
-            low_l, _ = _scatter_floor(*scatter_l)
+            low_l = _scatter_floor(*scatter_l)
             if low_l >= best + margin:
                 break  # the left half only grows from here, and its least eigenvalue with it
             if low_l >= bar:
                 continue
-            low_r, _ = _scatter_floor(*scatter_r)
+            low_r = _scatter_floor(*scatter_r)
             if low_l + low_r >= bar:
                 continue
             sse = _smallest_scatter(*scatter_l) + _smallest_scatter(*scatter_r)
