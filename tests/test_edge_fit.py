@@ -307,8 +307,10 @@ def test_the_fits_helpers_equal_numpys_and_their_single_forms():
     for c in (1, 2, 3, 8, 31, edge_fit.MAX_RING + 1):
         a = np.round(rng.normal(size=c + 4), 1)  # many equal values
         order = np.full(c + 4, -1, np.int64)
-        edge_fit._sort_order(a, c, order)
+        keys = a.copy()
+        edge_fit._sort_order(keys, c, order)
         assert list(order[:c]) == list(np.argsort(a[:c], kind="stable"))
+        assert list(keys[:c]) == sorted(a[:c]) and list(keys[c:]) == list(a[c:])
         b = a.copy()
         assert edge_fit._median_in_place(b, c) == np.median(a[:c])
         assert list(b[:c]) == sorted(a[:c]) and list(b[c:]) == list(a[c:])

@@ -937,6 +937,15 @@ def _scatter(m, k):
             syy - sy * sy / k, syz - sy * sz / k, szz - sz * sz / k)
 
 
+@jit_inline
+def _scatter_by(m, r):
+    """:func:`_scatter` with the division by the count ``k`` as a product by ``r = 1 / k``:
+    the same matrix but for the last bits, for the bounds (:func:`_seed_by_sweep`)."""
+    sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = m
+    return (sxx - sx * sx * r, sxy - sx * sy * r, sxz - sx * sz * r,
+            syy - sy * sy * r, syz - sy * sz * r, szz - sz * sz * r)
+
+
 @jit
 def _smallest_scatter(a00, a01, a02, a11, a12, a22):
     """Least eigenvalue of a scatter matrix (:func:`_scatter`): the points' sum of squared
@@ -946,10 +955,11 @@ def _smallest_scatter(a00, a01, a02, a11, a12, a22):
 
 
 #: :func:`_seed_by_sweep` computes a split's eigenvalues only if its lower bound
-#: (:func:`_scatter_floor`) falls short of the best so far plus this fraction of the two halves'
-#: traces. Estimated, not measured: that is far above the rounding of the bound (see there) and
-#: of the trigonometric eigenvalues (about sqrt(machine epsilon), 1e-8, of the trace where two
-#: of them nearly tie), so the split chosen is the same
+#: (:func:`_scatter_floor`) falls short of the best so far plus this fraction of the whole
+#: two-ring's trace (at least the two halves' traces). Estimated, not measured: that is far
+#: above the rounding of the bound (see there) and of the trigonometric eigenvalues (about
+#: sqrt(machine epsilon), 1e-8, of the trace where two of them nearly tie), so the split
+#: chosen is the same
 FLOOR_MARGIN = 1e-6
 #: Newton steps :func:`_scatter_floor` takes after its first bound
 FLOOR_STEPS = 2
@@ -996,16 +1006,19 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work, order):
     projects): of ``NDIR`` directions and every offset, the one whose two halves lie closest
     to two planes (least total squared plane distance, from running moments in sorted order),
     each half holding ``SWEEP_SIDE`` of the points or more. ``idx[0]`` is the point itself;
-    ``order``: int64 work array of length ``c`` or more (:func:`_sort_order`). Returns False if
-    ``c`` is too small for two such halves.
+    ``proj`` (float) and ``order`` (int64): work arrays of length ``c`` or more
+    (:func:`_sort_order`). Returns False if ``c`` is too small for two such halves.
 
-    A direction's sweep stops once the left half's lower bound (:func:`_scatter_floor`) clears
-    the best so far by ``FLOOR_MARGIN`` of the whole two-ring's trace: the left half only
-    gains points, its scatter matrix only grows (in the positive semi-definite order) and its
-    least eigenvalue with it, so no later split of that direction could be chosen. The margin
-    covers the rounding of every split's eigenvalues, whose halves' traces sum to at most the
-    whole's. The split is the same; on lone-star's failed fits this skips 32 % of the splits
-    (6.5 of 20.5 million, docs/measurements.md "The line sweep stops early")."""
+    Each half's least eigenvalue is monotone along a direction: the left half only gains
+    points, so its scatter matrix only grows (in the positive semi-definite order) and that
+    eigenvalue with it; the right half's only shrinks. A split is skipped where a lower bound
+    (:func:`_scatter_floor`) of the right half's alone, or of both, clears the best so far by
+    ``FLOOR_MARGIN`` of the whole two-ring's trace, and a direction's sweep stops where the
+    left half's alone does: no later split of it could be chosen. The margin covers the
+    rounding of the bounds and of every split's eigenvalues, whose halves' traces sum to at
+    most the whole's. The split is the same as with every split's eigenvalues; on lone-star's
+    failed fits the stop skips 32 % of the splits (6.5 of 20.5 million), and the sweep takes
+    0.73× the time it did (docs/measurements.md "The line sweep stops early")."""
     least = max(MIN_SIDE, int(np.ceil(SWEEP_SIDE * c)))
     if c < 2 * least:
         return False
@@ -1023,10 +1036,12 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work, order):
     best = np.inf
     best_d = 0
     best_k = least
+    found = False
     for d in range(NDIR):
         _project(X, idx, c, p, t1, t2, np.pi * d / NDIR, proj)
         _sort_order(proj, c, order)
         left = NO_MOMENTS
+        improved = False
         for k in range(1, c - least + 1):
             left = add_moments(left, X, idx[order[k - 1]], px, py, pz)
             if k < least:
@@ -1034,41 +1049,52 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work, order):
             right = (total[0] - left[0], total[1] - left[1], total[2] - left[2],
                      total[3] - left[3], total[4] - left[4], total[5] - left[5],
                      total[6] - left[6], total[7] - left[7], total[8] - left[8])
-            scatter_l = _scatter(left, k)
-            scatter_r = _scatter(right, c - k)
             # most splits cannot beat the best: a bound without eigenvalues rules them out,
-            # often the left half's alone (the right's bound is not negative)
-            bar = best + FLOOR_MARGIN * (max(scatter_l[0] + scatter_l[3] + scatter_l[5], 0.0)
-                                         + max(scatter_r[0] + scatter_r[3] + scatter_r[5], 0.0))
-            low_l = _scatter_floor(*scatter_l)
-            if low_l >= best + margin:
-                break  # the left half only grows from here, and its least eigenvalue with it
-            if low_l >= bar:
+            # from scatters by reciprocals (two divisions, not twelve; their rounding is far
+            # inside the margin), often the right half's alone at the start (it only shrinks)
+            # and the left half's alone at the end (it only grows)
+            bar = best + margin
+            low_r = _scatter_floor(*_scatter_by(right, 1.0 / (c - k)))
+            if low_r >= bar:
                 continue
-            low_r = _scatter_floor(*scatter_r)
+            low_l = _scatter_floor(*_scatter_by(left, 1.0 / k))
+            if low_l >= bar:
+                break  # the left half only grows from here, and its least eigenvalue with it
             if low_l + low_r >= bar:
                 continue
+            scatter_l = _scatter(left, k)
+            scatter_r = _scatter(right, c - k)
             sse = _smallest_scatter(*scatter_l) + _smallest_scatter(*scatter_r)
             if sse < best:
                 best, best_d, best_k = sse, d, k
-    _project(X, idx, c, p, t1, t2, np.pi * best_d / NDIR, proj)
-    _sort_order(proj, c, order)
-    for i in range(c):
-        side[order[i]] = 0 if i < best_k else 1
+                improved = True
+        if improved:  # the best split so far is this direction's: its sides, from its order
+            found = True
+            for i in range(c):
+                side[order[i]] = 0 if i < best_k else 1
+    if not found:  # no split's sum was below infinity (none can be: NaN-free points)
+        _project(X, idx, c, p, t1, t2, np.pi * best_d / NDIR, proj)
+        _sort_order(proj, c, order)
+        for i in range(c):
+            side[order[i]] = 0 if i < best_k else 1
     return True
 
 
 @jit_leaf
 def _sort_order(a, c, order):
     """``order[:c]``: the positions of ``a[:c]`` in ascending order, equal values in their
-    positions' order (an insertion sort: the sweep's two-rings hold at most ``MAX_RING`` + 1
-    points, and ``np.argsort`` allocated its result for each of them)."""
+    positions' order; ``a[:c]`` is sorted too, in place (an insertion sort moving each value
+    with its position, so that it compares values side by side rather than through
+    ``order``: the sweep's two-rings hold at most ``MAX_RING`` + 1 points, and
+    ``np.argsort`` allocated its result for each of them)."""
     for i in range(c):
         v = a[i]
         j = i - 1
-        while j >= 0 and a[order[j]] > v:
+        while j >= 0 and a[j] > v:
+            a[j + 1] = a[j]
             order[j + 1] = order[j]
             j -= 1
+        a[j + 1] = v
         order[j + 1] = i
 
 
