@@ -1036,12 +1036,10 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work, order):
     best = np.inf
     best_d = 0
     best_k = least
-    found = False
     for d in range(NDIR):
         _project(X, idx, c, p, t1, t2, np.pi * d / NDIR, proj)
         _sort_order(proj, c, order)
         left = NO_MOMENTS
-        improved = False
         for k in range(1, c - least + 1):
             left = add_moments(left, X, idx[order[k - 1]], px, py, pz)
             if k < least:
@@ -1067,16 +1065,9 @@ def _seed_by_sweep(X, idx, c, side, proj, normal, t1, t2, work, order):
             sse = _smallest_scatter(*scatter_l) + _smallest_scatter(*scatter_r)
             if sse < best:
                 best, best_d, best_k = sse, d, k
-                improved = True
-        if improved:  # the best split so far is this direction's: its sides, from its order
-            found = True
+        if best_d == d:  # the best split so far is this direction's (or none is, at d = 0)
             for i in range(c):
                 side[order[i]] = 0 if i < best_k else 1
-    if not found:  # no split's sum was below infinity (none can be: NaN-free points)
-        _project(X, idx, c, p, t1, t2, np.pi * best_d / NDIR, proj)
-        _sort_order(proj, c, order)
-        for i in range(c):
-            side[order[i]] = 0 if i < best_k else 1
     return True
 
 
