@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tiledsimplify import SimplifyOptions, metrics, simplify_points, synthetic
-from tiledsimplify.core import edge_fit
+from tiledsimplify.core import edge_fit, edge_lines, thin_walls, two_planes, two_ring
 from tiledsimplify.core.linalg import NO_MOMENTS, add_moments
 from tiledsimplify.core.simplify import boundary_flags, neighbourhoods, scale_of
 from tiledsimplify.errors import InputError
@@ -26,7 +26,7 @@ def _localise(X, st, candidate, min_angle=edge_fit.MIN_ANGLE, width=1.0, rim=Non
     ``rim`` (a bool array of ``len(X)``) if given."""
     n = len(X)
     nn = np.empty(n)
-    edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
+    two_ring.nearest_distances(X, st.start, st.cnt, st.pool, nn)
     dist, angle, line, local = np.empty(n), np.empty(n), np.empty((n, 6)), np.empty(n)
     corner, bend, narrowed = np.empty(n, bool), np.empty(n), np.empty(n, bool)
     edge_fit.localise(X, st.normals, st.dn, st.dn_cnt, nn, candidate, dist, angle, line, local,
@@ -48,7 +48,7 @@ def test_nearest_distances_equal_kdtree():
     X -= X.mean(0)
     st = neighbourhoods(X, scale_of(X))
     nn = np.empty(len(X))
-    edge_fit.nearest_distances(X, st.start, st.cnt, st.pool, nn)
+    two_ring.nearest_distances(X, st.start, st.cnt, st.pool, nn)
     np.testing.assert_allclose(nn, cKDTree(X).query(X, k=2)[0][:, 1], rtol=1e-12)
 
 
@@ -247,13 +247,13 @@ def test_sweep_seed_is_the_best_line_split(seed, shape):
     idx = np.arange(c)
     side = np.full(c, -1, np.int64)
     frame = [np.empty(3) for _ in range(3)]
-    assert edge_fit._seed_by_sweep(X, idx, c, side, np.empty(c), *frame, np.empty(3),
+    assert two_planes.seed_by_sweep(X, idx, c, side, np.empty(c), *frame, np.empty(3),
                                    np.empty(c, np.int64))
     assert set(np.unique(side)) == {0, 1}
-    least = max(edge_fit.MIN_SIDE, int(np.ceil(edge_fit.SWEEP_SIDE * c)))
+    least = max(two_planes.MIN_SIDE, int(np.ceil(two_planes.SWEEP_SIDE * c)))
     assert min(np.sum(side == 0), np.sum(side == 1)) >= least
     _, t1, t2 = frame  # the mean-plane frame the sweep used
-    naive = _naive_best_line_split(X, t1, t2, edge_fit.NDIR, least)
+    naive = _naive_best_line_split(X, t1, t2, two_planes.NDIR, least)
     np.testing.assert_allclose(_split_sse(X, side), naive, rtol=1e-7, atol=1e-12)
 
 
@@ -272,8 +272,8 @@ def test_scatter_floor_bounds_the_least_eigenvalue(shape):
         m = NO_MOMENTS
         for q in range(1, k + 1):  # moments of points 1..k about point 0, as the sweep sums
             m = add_moments(m, X, q, X[0, 0], X[0, 1], X[0, 2])
-        low = edge_fit._scatter_floor(*edge_fit._scatter(m, k))
-        exact = edge_fit._smallest_scatter(*edge_fit._scatter(m, k))
+        low = two_planes._scatter_floor(*two_planes._scatter(m, k))
+        exact = two_planes._smallest_scatter(*two_planes._scatter(m, k))
         q = P[1:] - P[1:].mean(0)
         trace = np.trace(q.T @ q)
         reference = max(np.linalg.eigvalsh(q.T @ q)[0], 0.0)
@@ -291,7 +291,7 @@ def test_sweep_seed_separates_the_faces_of_a_ridge():
     X[0] = [0.0, 0.0, 0.0]  # the point itself on the ridge
     side = np.empty(30, np.int64)
     frame = [np.empty(3) for _ in range(3)]
-    assert edge_fit._seed_by_sweep(X, np.arange(30), 30, side, np.empty(30), *frame, np.empty(3),
+    assert two_planes.seed_by_sweep(X, np.arange(30), 30, side, np.empty(30), *frame, np.empty(3),
                                    np.empty(30, np.int64))
     clear = np.abs(X[:, 0]) > 0.05
     left = side[clear & (X[:, 0] < 0)]
@@ -304,15 +304,15 @@ def test_the_fits_helpers_equal_numpys_and_their_single_forms():
     calls of ``_plane_fit`` in the edge fits (speed, not results): the same values to the
     last bit, equal values sorted in their positions' order."""
     rng = np.random.default_rng(11)
-    for c in (1, 2, 3, 8, 31, edge_fit.MAX_RING + 1):
+    for c in (1, 2, 3, 8, 31, two_ring.MAX_RING + 1):
         a = np.round(rng.normal(size=c + 4), 1)  # many equal values
         order = np.full(c + 4, -1, np.int64)
         keys = a.copy()
-        edge_fit._sort_order(keys, c, order)
+        two_planes._sort_order(keys, c, order)
         assert list(order[:c]) == list(np.argsort(a[:c], kind="stable"))
         assert list(keys[:c]) == sorted(a[:c]) and list(keys[c:]) == list(a[c:])
         b = a.copy()
-        assert edge_fit._median_in_place(b, c) == np.median(a[:c])
+        assert two_ring.median_in_place(b, c) == np.median(a[:c])
         assert list(b[:c]) == sorted(a[:c]) and list(b[c:]) == list(a[c:])
     X = rng.normal(size=(60, 3)) * [1.0, 1.0, 0.1] + rng.normal(size=3) * 10
     for k0 in (2, 3, 17, 30):
@@ -320,14 +320,14 @@ def test_the_fits_helpers_equal_numpys_and_their_single_forms():
         side = (np.arange(33) >= k0).astype(np.int64)
         rng.shuffle(side)
         both = [np.empty(3) for _ in range(5)]  # c1, n1, c2, n2, work
-        k0_, k1_, rms0, spread0 = edge_fit._plane_fits(X, idx, 33, side, *both)
+        k0_, k1_, rms0, spread0 = two_planes.plane_fits(X, idx, 33, side, *both)
         assert (k0_, k1_) == (k0, 33 - k0)
-        if k0 < edge_fit.MIN_SIDE:
+        if k0 < two_planes.MIN_SIDE:
             continue
         for which, centre, normal, rms, spread in ((0, both[0], both[1], rms0, spread0),
                                                    (1, both[2], both[3], *both[4][:2])):
             alone = [np.empty(3) for _ in range(3)]
-            assert edge_fit._plane_fit(X, idx, 33, side, which, *alone) == (k0, 33 - k0)[which]
+            assert two_planes.plane_fit(X, idx, 33, side, which, *alone) == (k0, 33 - k0)[which]
             assert list(alone[0]) == list(centre) and list(alone[1]) == list(normal)
             assert (alone[2][0], alone[2][1]) == (rms, spread)
 
@@ -363,7 +363,7 @@ def _naive_borrow(X, dn, dn_cnt, candidate, distance, angle, line, local, width,
         for q in sorted(_two_ring(dn, dn_cnt, p)):
             if distance[q] <= width and angle[q] >= edge_fit.SOFT_ANGLE and not corner[q]:
                 d = np.linalg.norm(np.cross(X[p] - line[q, :3], line[q, 3:])) / local[p]
-                if d < out[p] and d <= edge_fit.BORROW_WIDTH * width:
+                if d < out[p] and d <= edge_lines.BORROW_WIDTH * width:
                     out[p], angle_out[p] = d, angle[q]
     return out, angle_out
 
@@ -383,7 +383,7 @@ def _steps_1_2(X, width=1.0):
     st = neighbourhoods(X, scale_of(X))
     n = len(X)
     dev, smooth = np.empty(n), np.empty((n, 3))
-    edge_fit.smoothed_deviations(X, st.dn, st.dn_cnt, smooth, dev)
+    two_ring.smoothed_deviations(X, st.dn, st.dn_cnt, smooth, dev)
     cand = dev > edge_fit.CANDIDATE
     nn, dist, ang, line, local, corner, bend, _ = _localise(X, st, cand, width=width)
     return X, st, cand, dist, ang, line, local, corner, nn, bend
@@ -406,7 +406,7 @@ def test_borrow_equals_a_naive_search(data_dir):
     assert corner.sum() >= 3  # corner fits are there, and lend to nobody
     for width in (1.0, 0.5):
         out, out_angle = np.empty(n), np.empty(n)
-        edge_fit.borrow(X, st.dn, st.dn_cnt, dist, ang, line, local, width,
+        edge_lines.borrow(X, st.dn, st.dn_cnt, dist, ang, line, local, width,
                         edge_fit.band(dist, ang, width), corner, out, out_angle)
         ref, ref_angle = _naive_borrow(X, st.dn, st.dn_cnt, cand, dist, ang, line, local,
                                        width, corner)
@@ -428,7 +428,7 @@ def test_line_distances_equal_a_naive_search(data_dir):
     n = len(X)
     for width, spacing in ((1.0, 0.0), (1.0, float(np.median(local[cand]))), (0.5, 1e9)):
         out = np.full(n, np.inf)
-        edge_fit.line_distances(X, st.dn, st.dn_cnt, dist, ang, line, local, width, spacing,
+        edge_lines.line_distances(X, st.dn, st.dn_cnt, dist, ang, line, local, width, spacing,
                                 corner, out)
         ref = np.full(n, np.inf)
         lenders = np.flatnonzero((dist <= width) & (ang >= edge_fit.SOFT_ANGLE) & ~corner)
@@ -455,12 +455,12 @@ def _naive_reach(X, dn, dn_cnt, q, reach):
                 seen.add(t)
                 if np.sum((X[t] - X[q]) ** 2) <= reach * reach:
                     todo.append(t)
-    assert len(seen) < edge_fit.MAX_REACH_POINTS  # the walk's cap never cut this one
+    assert len(seen) < edge_lines.MAX_REACH_POINTS  # the walk's cap never cut this one
     return reached
 
 
 def _naive_nearest_lines(X, dn, dn_cnt, lender, line, reach, spacing):
-    """:func:`edge_fit.nearest_line_distances` by Python sets: each lender's points reached
+    """:func:`edge_lines.nearest_line_distances` by Python sets: each lender's points reached
     through the local mesh within ``reach`` of it, each point's ``FLAG_FITS`` nearest of the
     lenders reaching it (ties to the lower index), its least distance to their lines."""
     reached = [[] for _ in range(len(X))]
@@ -469,7 +469,7 @@ def _naive_nearest_lines(X, dn, dn_cnt, lender, line, reach, spacing):
             reached[r].append((float(np.sum((X[r] - X[q]) ** 2)), int(q)))
     out = np.full(len(X), np.inf)
     for p, near in enumerate(reached):
-        for _, q in sorted(near)[:edge_fit.FLAG_FITS]:
+        for _, q in sorted(near)[:edge_lines.FLAG_FITS]:
             out[p] = min(out[p], np.linalg.norm(np.cross(X[p] - line[q, :3], line[q, 3:])))
     return out / spacing
 
@@ -485,7 +485,7 @@ def test_nearest_line_distances_equal_a_naive_search(data_dir):
     for mask, reach in ((lender, 4.0 * spacing), (lender, 2.0 * spacing),
                         (lender & (np.arange(len(X)) % 2 == 0), 4.0 * spacing)):
         out = np.empty(len(X))
-        edge_fit.nearest_line_distances(X, st.dn, st.dn_cnt, mask, line, reach, spacing, out)
+        edge_lines.nearest_line_distances(X, st.dn, st.dn_cnt, mask, line, reach, spacing, out)
         ref = _naive_nearest_lines(X, st.dn, st.dn_cnt, mask, line, reach, spacing)
         np.testing.assert_allclose(out, ref, rtol=1e-12)
         reached.append(np.isfinite(out).sum())
@@ -493,7 +493,7 @@ def test_nearest_line_distances_equal_a_naive_search(data_dir):
 
 
 def _naive_confirmed(X, dn, dn_cnt, fit, sure, line, reach, offset, min_cos):
-    """:func:`edge_fit.confirmed_lines` by Python sets: a fit not sure of itself lends where
+    """:func:`edge_lines.confirmed_lines` by Python sets: a fit not sure of itself lends where
     another fit reached through the local mesh within ``reach`` of it has a line within
     ``offset`` of its point's foot on its own line and as parallel as ``min_cos``."""
     out = sure.copy()
@@ -522,7 +522,7 @@ def test_confirmed_lines_equal_a_naive_search(data_dir):
     counts = []
     for offset in (0.3 * spacing, 0.05 * spacing):
         out = np.empty(len(X), dtype=bool)
-        edge_fit.confirmed_lines(X, st.dn, st.dn_cnt, fit, sure, line, 3.0 * spacing, offset,
+        edge_lines.confirmed_lines(X, st.dn, st.dn_cnt, fit, sure, line, 3.0 * spacing, offset,
                                  cos20, out)
         ref = _naive_confirmed(X, st.dn, st.dn_cnt, fit, sure, line, 3.0 * spacing, offset,
                                cos20)
@@ -532,7 +532,7 @@ def test_confirmed_lines_equal_a_naive_search(data_dir):
     assert far > counts[0] > counts[1] > 0, (far, counts)
     alone = np.empty(len(X), dtype=bool)
     for f in (sure, np.zeros(len(X), dtype=bool)):
-        edge_fit.confirmed_lines(X, st.dn, st.dn_cnt, f, f, line, 3.0 * spacing,
+        edge_lines.confirmed_lines(X, st.dn, st.dn_cnt, f, f, line, 3.0 * spacing,
                                  0.3 * spacing, cos20, alone)
         np.testing.assert_array_equal(alone, f)
 
@@ -571,7 +571,7 @@ def test_flags_reach_one_spacing_beside_the_band(data_dir, monkeypatch, part, sc
     small = simplify_points(X, ratio=0.05, options={"refine": False})
     assert small.band.sum() > 0.4 * small.target
     refined = simplify_points(X, ratio=0.05)
-    monkeypatch.setattr(edge_fit, "line_distances", lambda *args: None)  # the band alone
+    monkeypatch.setattr(edge_lines, "line_distances", lambda *args: None)  # the band alone
     alone = simplify_points(X, ratio=0.05, options={"refine": False})
     # (and the points their own corner fit flags, which are features and not band in both)
     np.testing.assert_array_equal(alone.band, small.band)
@@ -644,14 +644,14 @@ def _faces_around(p, faces, h, radius):
 
 def _fit_corner(X, normals, idx, spacing, min_angle=edge_fit.MIN_ANGLE):
     c = len(idx)
-    ids = np.empty(edge_fit.MAX_RING + 1, np.int64)
+    ids = np.empty(two_ring.MAX_RING + 1, np.int64)
     ids[:c] = idx
     line = np.full(6, np.nan)
     d, fold = edge_fit._fit_corner(
-        X, normals, ids, c, np.empty(edge_fit.MAX_RING + 1, np.int64), np.empty((3, 3)),
+        X, normals, ids, c, np.empty(two_ring.MAX_RING + 1, np.int64), np.empty((3, 3)),
         np.empty((3, 3)), np.empty(3), spacing, line, np.empty(6),
-        np.cos(np.deg2rad(min_angle)), np.empty(edge_fit.MAX_RING + 1),
-        np.empty(edge_fit.MAX_RING + 1, np.int64))
+        np.cos(np.deg2rad(min_angle)), np.empty(two_ring.MAX_RING + 1),
+        np.empty(two_ring.MAX_RING + 1, np.int64))
     return d, fold, line
 
 
@@ -664,7 +664,7 @@ def test_corner_fit_finds_the_nearest_edge_of_three_faces():
              ((1, 0, 0), lambda x: x[1] <= 0 and x[2] < 0),
              ((0, 1, 0), lambda x: x[0] < 0 and x[2] < 0)]
     X, normals, idx = _faces_around(p, faces, h, 2.5 * h)
-    assert len(idx) <= edge_fit.MAX_RING
+    assert len(idx) <= two_ring.MAX_RING
     d, fold, line = _fit_corner(X, normals, idx, h)
     assert d == pytest.approx(0.3 * h, abs=1e-9)
     assert fold == pytest.approx(90.0, abs=1e-6)
@@ -690,7 +690,7 @@ def test_corner_fit_finds_nothing_on_a_thin_wall():
     below, nb, _ = _faces_around([-0.4 * h, 0.0, -2 * h], [((0, 0, -1), lambda x: x[0] <= 0)],
                                  h, 1.5 * h)
     X, normals = np.vstack([X, below]), np.vstack([normals, nb])
-    assert len(X) <= edge_fit.MAX_RING
+    assert len(X) <= two_ring.MAX_RING
     assert _fit_corner(X, normals, np.arange(len(X)), h)[0] == np.inf
     # the top face and the rim alone: two faces are the two-plane fit's, not a corner
     assert _fit_corner(*_faces_around(p, top, h, 2.5 * h), h)[0] == np.inf
@@ -873,12 +873,12 @@ def test_creases_flag_as_far_as_sharp_edges(data_dir, monkeypatch):
 
 
 def _own_layer(X, p=0):
-    """``edge_fit.own_layer`` on all of ``X`` with ``X[p]`` first: the indices it keeps."""
+    """``thin_walls.own_layer`` on all of ``X`` with ``X[p]`` first: the indices it keeps."""
     c = len(X)
-    idx = np.empty(edge_fit.MAX_RING + 1, np.int64)
+    idx = np.empty(two_ring.MAX_RING + 1, np.int64)
     idx[:c] = np.r_[p, np.delete(np.arange(c), p)]
     nn = np.sort(np.linalg.norm(X[:, None] - X[None], axis=2), axis=1)[:, 1]
-    m = edge_fit.own_layer(X, idx, c, float(np.median(nn)), np.empty(c), np.empty(3),
+    m = thin_walls.own_layer(X, idx, c, float(np.median(nn)), np.empty(c), np.empty(3),
                            np.empty(3))
     assert idx[0] == p
     return idx[:m]
@@ -922,7 +922,7 @@ def test_the_rim_of_a_thin_plate_is_flagged():
     joins the faces, whose two-plane fits found parallel planes (no edge) or wedges across
     the wall (false edges inside). Before each point's own sheet was fitted alone, F1 0.17
     and 80 flags more than 3 spacings from the rim; then 0.68 and 1; with the rim fits
-    (``edge_fit._fit_rim``) 0.87 and 2 (24 without ``_rim_clear``: two interior points whose
+    (``thin_walls.fit_rim``) 0.87 and 2 (24 without ``_rim_clear``: two interior points whose
     local mesh lies to one side)."""
     X, d = _thin_plate()
     flags = np.asarray(simplify_points(X, ratio=0.2).boundary, bool)
@@ -967,7 +967,7 @@ def test_a_thin_plates_rim_is_fitted_where_both_sheets_end(data_dir, noise):
     rim = np.empty(len(X), bool)
     _, out, angle, *_ = _localise(Xc, neighbourhoods(Xc, scale_of(Xc)), np.ones(len(X), bool),
                                   rim=rim)
-    assert (out[rim] <= edge_fit.RIM_REACH).all() and (angle[rim] == 90.0).all()
+    assert (out[rim] <= thin_walls.RIM_REACH).all() and (angle[rim] == 90.0).all()
     if noise is None:
         assert rim.sum() > 250 and (d[rim] <= 1).all()
     else:
@@ -976,9 +976,9 @@ def test_a_thin_plates_rim_is_fitted_where_both_sheets_end(data_dir, noise):
     # tangent planes: evenly, 116 borders more (432 in all), every one within a spacing of an
     # edge; the scans' lines leave empty angles everywhere, and it does not run there
     st = neighbourhoods(Xc, scale_of(Xc))
-    gap = edge_fit.median_ring_gap(Xc, st.normals, st.dn, st.dn_cnt, synthetic.spacing(Xc),
+    gap = thin_walls.median_ring_gap(Xc, st.normals, st.dn, st.dn_cnt, synthetic.spacing(Xc),
                                    512)
-    assert (gap < edge_fit.FILLED_GAP) == (noise is None)
+    assert (gap < thin_walls.FILLED_GAP) == (noise is None)
     if noise is None:
         border = np.empty(len(X), bool)
         _, out, angle, *_ = _localise(Xc, st, np.ones(len(X), bool), rim=border, filled=True)
@@ -1005,7 +1005,7 @@ def test_a_border_is_an_empty_angle_about_the_point(where, found):
     X = _two_sheets(rng, g)
     line = np.empty(6)
     ring = np.array([q for q in range(len(X)) if q != p])
-    d = edge_fit._border_gap(X, p, ring, len(ring), 1.0, np.array([0.0, 0.0, 1.0]),
+    d = thin_walls.border_gap(X, p, ring, len(ring), 1.0, np.array([0.0, 0.0, 1.0]),
                              np.empty(len(ring)), line, np.empty(3), np.empty(3))
     if found:
         assert d == 0.0 and np.allclose(line[:3], X[p]) and abs(line[4]) > 0.95  # along y
@@ -1022,18 +1022,18 @@ def test_a_line_scan_shows_no_border_and_does_not_fill_its_planes():
     X = np.c_[g, 0.05 * rng.normal(size=len(g))]
     p = np.argmin(np.abs(X[:, 0]) + np.abs(X[:, 1]))
     ring = np.array([q for q in range(len(X)) if q != p])
-    assert edge_fit._border_gap(X, p, ring, len(ring), 1.0, np.array([0.0, 0.0, 1.0]),
+    assert thin_walls.border_gap(X, p, ring, len(ring), 1.0, np.array([0.0, 0.0, 1.0]),
                                 np.empty(len(ring)), np.empty(6), np.empty(3),
                                 np.empty(3)) == np.inf
     st = neighbourhoods(X, scale_of(X))
-    gap = edge_fit.median_ring_gap(X, st.normals, st.dn, st.dn_cnt, 1.0, 256)
-    assert gap > edge_fit.FILLED_GAP
+    gap = thin_walls.median_ring_gap(X, st.normals, st.dn, st.dn_cnt, 1.0, 256)
+    assert gap > thin_walls.FILLED_GAP
     even = np.mgrid[-16:16.5:1.0, -20:20.5:1.0].reshape(2, -1).T
     even = even + 0.2 * rng.normal(size=even.shape)
     Xe = np.c_[even, 0.05 * rng.normal(size=len(even))]
     st = neighbourhoods(Xe, scale_of(Xe))
-    gap = edge_fit.median_ring_gap(Xe, st.normals, st.dn, st.dn_cnt, 1.0, 256)
-    assert gap < edge_fit.FILLED_GAP
+    gap = thin_walls.median_ring_gap(Xe, st.normals, st.dn, st.dn_cnt, 1.0, 256)
+    assert gap < thin_walls.FILLED_GAP
 
 
 def _scanned_step(rng, height=5.0, pitch=0.01, lines=4.0, noise=0.1):
@@ -1055,17 +1055,17 @@ def _whole_ring_fits(X, st, nn, points):
     """The edge distance (local spacings) of each of ``points`` fitted over its whole two-ring,
     as ``localise`` fits it first (its own sheet, then the normal seeds and the sweep)."""
     mark = np.zeros(len(X), np.int64)
-    idx, side = np.empty(edge_fit.MAX_RING + 1, np.int64), np.empty(edge_fit.MAX_RING + 1, np.int64)
-    proj, line = np.empty(edge_fit.MAX_RING + 1), np.empty(6)
-    order = np.empty(edge_fit.MAX_RING + 1, np.int64)
+    idx, side = np.empty(two_ring.MAX_RING + 1, np.int64), np.empty(two_ring.MAX_RING + 1, np.int64)
+    proj, line = np.empty(two_ring.MAX_RING + 1), np.empty(6)
+    order = np.empty(two_ring.MAX_RING + 1, np.int64)
     c1, n1, c2, n2, work = (np.empty(3) for _ in range(5))
     max_cos = np.cos(np.deg2rad(edge_fit.MIN_ANGLE))
     out = np.empty(len(points))
     for i, p in enumerate(points):
         idx[0] = p
-        c = 1 + edge_fit.gather_rings(p, st.dn, st.dn_cnt, edge_fit.FIT_RINGS, mark, idx[1:])
+        c = 1 + two_ring.gather_rings(p, st.dn, st.dn_cnt, two_ring.FIT_RINGS, mark, idx[1:])
         s = np.median(nn[idx[:c]])
-        c = edge_fit.own_layer(X, idx, c, s, proj, c1, work)
+        c = thin_walls.own_layer(X, idx, c, s, proj, c1, work)
         d, _ = edge_fit.edge_distance(X, st.normals, idx, c, side, c1, n1, c2, n2, work, s,
                                       proj, line, max_cos, order)
         out[i] = d / s

@@ -84,7 +84,7 @@ class SimplifyOptions:
         ``"coverage"``: flag candidates within this many local spacings of the fitted edge
         (0.7 of it beside edges whose faces fold by less than 60°, :func:`.edge_fit.band`;
         0.5 of it from a neighbour's edge where a candidate's own fit does not flag it,
-        :func:`.edge_fit.borrow`).
+        :func:`.edge_lines.borrow`).
     edge_angle : float
         ``"coverage"``: the least fold, in degrees, of a sharp edge: where the two faces fitted
         around a candidate fold by less (the angle between their planes), it is not flagged.

@@ -17,7 +17,7 @@ from ..errors import BudgetWarning, InputError
 from . import adjacency
 from . import boundary as boundary_mod
 from . import cell_grid
-from . import edge_fit
+from . import edge_fit, edge_lines, thin_walls, two_ring
 from . import prethin as prethin_mod
 from .bounds import box, finite_rows
 from .heap import coordinate_hash
@@ -38,8 +38,8 @@ from .zorder import distinct
 #: ``VmHWM`` less its RSS just before the call, peak reset by ``clear_refs``): 688 / 681 / 809 /
 #: 681 bytes a point. What the ``simplify`` command checks against the memory left.
 PEAK_BYTES_PER_POINT = 900
-#: points sampled for :func:`.edge_fit.median_ring_gap`, whether the sampling fills its tangent
-#: planes (the thin walls' border test, :func:`.edge_fit._border_gap`, needs it)
+#: points sampled for :func:`.thin_walls.median_ring_gap`, whether the sampling fills its
+#: tangent planes (the thin walls' border test, :func:`.thin_walls.border_gap`, needs it)
 GAP_SAMPLE = 512
 
 
@@ -213,13 +213,13 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
             floor=options.boundary_floor)
         return deviation, flags, flags, flags, threshold
     smooth_normals = np.zeros((m, 3))
-    edge_fit.smoothed_deviations(Xu, st.dn, st.dn_cnt, smooth_normals, deviation)
+    two_ring.smoothed_deviations(Xu, st.dn, st.dn_cnt, smooth_normals, deviation)
     if not options.detect_boundary:
         return deviation, none, none, none, float("inf")
     threshold = (edge_fit.CANDIDATE if options.boundary_threshold is None
                  else float(options.boundary_threshold))
     nn = np.empty(m)
-    edge_fit.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
+    two_ring.nearest_distances(Xu, st.start, st.cnt, st.pool, nn)
     fitted, fitted_angle, line, local = np.empty(m), np.empty(m), np.empty((m, 6)), np.empty(m)
     corner = np.empty(m, dtype=bool)
     bend = np.empty(m)
@@ -227,8 +227,8 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     rim = np.empty(m, dtype=bool)
     width = float(options.edge_width)
     spacing = float(median_spacing(Xu) if spacing is None else spacing)
-    gap = edge_fit.median_ring_gap(Xu, st.normals, st.dn, st.dn_cnt, spacing, GAP_SAMPLE)
-    filled = bool(gap < edge_fit.FILLED_GAP)  # the thin walls' border test needs it
+    gap = thin_walls.median_ring_gap(Xu, st.normals, st.dn, st.dn_cnt, spacing, GAP_SAMPLE)
+    filled = bool(gap < thin_walls.FILLED_GAP)  # the thin walls' border test needs it
     edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, fitted,
                       fitted_angle, line, local, float(options.edge_angle), width, corner,
                       bend, narrowed, rim, filled)
@@ -247,25 +247,26 @@ def _lending_fits(fitted, fitted_angle, width, corner, bend):
     a sharp edge (a fold of ``SOFT_ANGLE`` or more) or a crease, not a smooth fold nor a
     corner (:func:`.edge_fit.fold_kinds`)."""
     smooth, crease = edge_fit.fold_kinds(bend, fitted_angle)
-    return ((fitted <= edge_fit.FAR_FIT * width) & ~smooth & ~corner
+    return ((fitted <= edge_lines.FAR_FIT * width) & ~smooth & ~corner
             & ((fitted_angle >= edge_fit.SOFT_ANGLE) | crease))
 
 
 def _confirmed(Xu, st, fit, sure, line, spacing):
-    """:func:`.edge_fit.confirmed_lines` at the cloud ``spacing``'s reach and offset."""
+    """:func:`.edge_lines.confirmed_lines` at the cloud ``spacing``'s reach and offset."""
     out = np.empty(Xu.shape[0], dtype=bool)
-    edge_fit.confirmed_lines(Xu, st.dn, st.dn_cnt, fit, sure, line,
-                             edge_fit.CONFIRM_REACH * spacing, edge_fit.CONFIRM_OFFSET * spacing,
-                             math.cos(math.radians(edge_fit.CONFIRM_ANGLE)), out)
+    edge_lines.confirmed_lines(Xu, st.dn, st.dn_cnt, fit, sure, line,
+                               edge_lines.CONFIRM_REACH * spacing,
+                               edge_lines.CONFIRM_OFFSET * spacing,
+                               math.cos(math.radians(edge_lines.CONFIRM_ANGLE)), out)
     return out
 
 
 def _confirm_narrowed(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend,
                       narrowed):
     """Drops (in place) the fits over the near part of a two-ring and the steps (``narrowed``,
-    see :func:`.edge_fit.near_part` and :func:`.edge_fit._fit_step`) that no other fit
+    see :func:`.edge_fit.near_part` and :func:`.thin_walls.fit_step`) that no other fit
     confirms: each is kept only where another lending fit's line runs beside its own
-    (:func:`.edge_fit.confirmed_lines`). A few points fit two
+    (:func:`.edge_lines.confirmed_lines`). A few points fit two
     planes by chance; alone, such a line made features and flags along it (measured on the 36
     CAD quality cases, docs/measurements.md "Scans: the near part of the two-ring": every
     narrowed fit standing, at 6 local spacings, plate_holes' noise-0.2 scan's F1 0.780 ->
@@ -285,10 +286,10 @@ def _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend, at_
            narrowed):
     """The flags of :func:`.edge_fit.localise`'s fits: the points within ``width`` cloud
     ``spacing``s of the line of one of their nearest lenders
-    (:func:`.edge_fit.nearest_line_distances`) — the fits on a sharp edge (a fold of
+    (:func:`.edge_lines.nearest_line_distances`) — the fits on a sharp edge (a fold of
     ``SOFT_ANGLE`` or more) or a crease (:func:`.edge_fit.fold_kinds`), not smooth folds nor
     corners, within ``width`` of their own line, or within ``FAR_FIT`` widths where another
-    fit's line confirms theirs (:func:`.edge_fit.confirmed_lines`), as every ``narrowed``
+    fit's line confirms theirs (:func:`.edge_lines.confirmed_lines`), as every ``narrowed``
     fit (over the near part of its two-ring, or a step: kept by :func:`_confirm_narrowed`
     beside another fit, it is confirmed again among the fits left) — and the points their own
     corner fit flags (``at_corner``)."""
@@ -297,8 +298,8 @@ def _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend, at_
     fit = _lending_fits(fitted, fitted_angle, width, corner, bend)
     lender = _confirmed(Xu, st, fit, fit & (fitted <= width) & ~narrowed, line, spacing)
     near = np.empty(Xu.shape[0])
-    edge_fit.nearest_line_distances(Xu, st.dn, st.dn_cnt, lender, line,
-                                    edge_fit.FLAG_REACH * spacing, spacing, near)
+    edge_lines.nearest_line_distances(Xu, st.dn, st.dn_cnt, lender, line,
+                                      edge_lines.FLAG_REACH * spacing, spacing, near)
     return at_corner | (near <= width)
 
 
@@ -308,32 +309,32 @@ def _features_of_fits(Xu, st, fitted, fitted_angle, line, local, width, spacing,
 
     The core band: the candidates within ``width`` local spacings of a fitted line — their own
     or, where that does not flag them (no fit, or a farther line), a flagged neighbour's
-    (:func:`.edge_fit.borrow`; each point's distance to it into ``distance``) — less beside a
+    (:func:`.edge_lines.borrow`; each point's distance to it into ``distance``) — less beside a
     soft edge (:func:`.edge_fit.band`). The features add the points their own corner fit flags
     and every point within ``width`` spacings of a sharp fitted line near it
-    (:func:`.edge_fit.line_distances`). ``own``: the candidates their own fit flags
+    (:func:`.edge_lines.line_distances`). ``own``: the candidates their own fit flags
     (:func:`.edge_fit.band` of ``fitted``).
 
-    A thin wall's rim (``rim``: :func:`.edge_fit._fit_rim`) makes features but not the core
+    A thin wall's rim (``rim``: :func:`.thin_walls.fit_rim`) makes features but not the core
     band: in the band, sure of being kept, its points took the tray scans' budget from their
     faces (Hausdorff 1.19x -> 1.24x the best peer's on the noise-0.2 scan; as features only
     1.16x, docs/measurements.md "Thin walls' rims").
     """
     m = Xu.shape[0]
     angle = np.empty(m)
-    edge_fit.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width, own, corner,
-                    distance, angle)
+    edge_lines.borrow(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width, own,
+                      corner, distance, angle)
     # points their own corner fit flags are features, not the core band: the band is sure of
     # being kept and never swapped out, and a corner's line ends at the corner
     at_corner = own & corner
     band = edge_fit.band(distance, angle, width) & ~at_corner
     near = np.full(m, np.inf)
-    edge_fit.line_distances(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width,
-                            spacing, corner, near)
+    edge_lines.line_distances(Xu, st.dn, st.dn_cnt, fitted, fitted_angle, line, local, width,
+                              spacing, corner, near)
     features = band | at_corner | (near <= width)
     if rim.any():  # the band again without the rims' lines
-        edge_fit.borrow(Xu, st.dn, st.dn_cnt, np.where(rim, np.inf, fitted), fitted_angle, line,
-                        local, width, own & ~rim, corner, distance, angle)
+        edge_lines.borrow(Xu, st.dn, st.dn_cnt, np.where(rim, np.inf, fitted), fitted_angle,
+                          line, local, width, own & ~rim, corner, distance, angle)
         band = edge_fit.band(distance, angle, width) & ~at_corner
     return band, features
 
