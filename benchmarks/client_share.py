@@ -5,9 +5,9 @@ every pass of the global cut over the tiles' removal sequences and the writing o
 million kept points. On a cluster both now read the tiles on its workers: the cut's passes
 (:func:`tiledsimplify.pipeline.budget.store_pass`, batches of tiles, merged in the client) and
 the output's tiles, which the workers also pack as the output's point records (quantised,
-checked, the three added dimensions; :func:`tiledsimplify.pipeline.run._tile_piece`,
+checked, the three added dimensions; :func:`tiledsimplify.pipeline.output._tile_piece`,
 :meth:`tiledsimplify.io.las.LasLayout.pack`) and, for LAZ, compress into the file's LASzip
-chunks, those that straddle tiles too (:func:`tiledsimplify.pipeline.run._write_laz_chunks`)
+chunks, those that straddle tiles too (:func:`tiledsimplify.pipeline.output._write_laz_chunks`)
 — the client then only writes bytes. With ``--scheduler-process`` the scheduler runs in a
 process of its own (as on a real cluster); a ``LocalCluster`` runs it in this one, whose CPU
 then includes the scheduler's work.
@@ -96,7 +96,7 @@ def main(argv=None):
                     out = Path(tmp) / f"out{r}{len(rows)}{args.suffix}"
                     before = client.run(_cpu)
                     t, c = time.perf_counter(), _cpu()
-                    n_out, _ = run_module._write_output(
+                    n_out, _ = run_module.write_output(
                         ts, src, out, prefix, refined, client if how == on_cluster else None)
                     wall, client_cpu = time.perf_counter() - t, _cpu() - c
                     after = client.run(_cpu)

@@ -32,8 +32,8 @@ def _cpu():
 
 
 def _cluster_map(client):
-    from tiledsimplify.pipeline.run import _IngestProgress, _parts_mapper
-    return _parts_mapper(None, None, client, _IngestProgress(1, False))
+    from tiledsimplify.pipeline.run import IngestProgress, _parts_mapper
+    return _parts_mapper(None, None, client, IngestProgress(1, False))
 
 
 def main(argv=None):

@@ -12,7 +12,7 @@ again for its peak memory: Python's traced allocation peak (``tracemalloc``, whi
 reports to), the peer's including the sequences it holds.
 
 Output (``--store DIR``, a finished tile store, e.g. ``tiledsimplify run ... --store DIR``):
-the pipeline's writer (``pipeline.run._write_output``: each kept point written at its rank in
+the pipeline's writer (``pipeline.output.write_output``: each kept point written at its rank in
 input order, a tile at a time) against the peer it replaced: every tile's kept points gathered,
 sorted into input order and written whole (``write_points``); the same bytes, both timed and
 traced.
@@ -33,7 +33,7 @@ import numpy as np
 
 from tiledsimplify.io.points_out import write_points
 from tiledsimplify.pipeline.budget import global_cut, kept_in_tile, store_cut
-from tiledsimplify.pipeline.run import _write_output
+from tiledsimplify.pipeline.output import write_output
 from tiledsimplify.tiles import TileStore
 
 STEPS = 100_000
@@ -133,7 +133,7 @@ def output_table(store, ratio):
     print("|---:|---:|---:|---:|---:|---:|---:|:---:|")
     with tempfile.TemporaryDirectory() as tmp:
         a, b = Path(tmp) / "a.npy", Path(tmp) / "b.npy"
-        (n_out, _), s_ours, mb_ours = measure(_write_output, ts, None, a, prefix)
+        (n_out, _), s_ours, mb_ours = measure(write_output, ts, None, a, prefix)
         _, s_peer, mb_peer = measure(gathered_output, ts, b, prefix)
         same = a.read_bytes() == b.read_bytes()
     print(f"| {ts.n_total:,} | {ts.n_tiles} | {n_out:,} | {s_ours:.2f} | {mb_ours:.1f} | "

@@ -737,7 +737,7 @@ def test_las_ingested_in_parts_by_the_workers_gives_the_same_output(data_dir, tm
 def test_laz_compressed_by_the_workers_is_the_synchronous_runs_file(data_dir, tmp_path,
                                                                     cluster):
     """On a cluster the workers pack and compress the LAZ output's chunks, those straddling
-    tiles too (``run._write_laz_chunks``): 55,000 points kept from tiles of ~15,000, so
+    tiles too (``output._write_laz_chunks``): 55,000 points kept from tiles of ~15,000, so
     chunks of 50,000 span several tiles; the file is the synchronous run's, byte for byte."""
     src = data_dir / "lidar" / "autzen_trim.laz"
     kw = {"ratio": 0.5, "tile_points": 30000}
@@ -1015,14 +1015,14 @@ def test_ingest_logs_its_progress(bunny, tmp_path, caplog):
 def test_stage_lines_give_the_share_of_points_done_and_the_time_left(bunny, tmp_path, caplog,
                                                                      monkeypatch):
     import importlib
-    R = importlib.import_module("tiledsimplify.pipeline.run")  # the module, not run()
-    assert [R._duration(s) for s in (0.4, 89, 90, 738, 5399, 5400, 7560)] == [
+    P = importlib.import_module("tiledsimplify.pipeline.progress")
+    assert [P.duration(s) for s in (0.4, 89, 90, 738, 5399, 5400, 7560)] == [
         "0 s", "89 s", "1.5 min", "12.3 min", "90.0 min", "1.5 h", "2.1 h"]
     clock = iter([100.0, 130.0, 190.0, 250.0])  # the stage starts at 100 s
-    monkeypatch.setattr(R.time, "perf_counter", lambda: next(clock))
+    monkeypatch.setattr(P.time, "perf_counter", lambda: next(clock))
     said = []
-    p = R._Progress("tiles", 3, lambda r, done, total, pace: said.append(pace), False,
-                    points=400)
+    p = P.Progress("tiles", 3, lambda r, done, total, pace: said.append(pace), False,
+                   points=400)
     for n_core in (100, 200, 100):  # the largest tiles first: 1/3 of the tiles, 1/4 of points
         p({"n_core": n_core})
     assert said == ["; 25 % of points in 30 s, ~1.5 min left",
@@ -1140,7 +1140,7 @@ def test_a_lost_scheduler_is_an_error_saying_how_to_go_on(bunny, tmp_path, clust
 
     def lost(*args, **kwargs):
         raise FutureCancelledError("tile-piece-3", "scheduler-connection-lost")
-    monkeypatch.setattr(R, "_write_output", lost)
+    monkeypatch.setattr(R, "write_output", lost)
     with pytest.raises(TiledSimplifyError, match=r"the connection to the dask scheduler was "
                                                  r"lost during the run; no output written\. The "
                                                  r"finished tiles stay in .*s\.zarr"):
@@ -1149,7 +1149,7 @@ def test_a_lost_scheduler_is_an_error_saying_how_to_go_on(bunny, tmp_path, clust
 
     def other(*args, **kwargs):  # any other cancellation is not taken for a lost scheduler
         raise FutureCancelledError("tile-piece-3", "unknown")
-    monkeypatch.setattr(R, "_write_output", other)
+    monkeypatch.setattr(R, "write_output", other)
     with pytest.raises(FutureCancelledError):
         run(path, tmp_path / "o.npy", ratio=0.2, client=cluster, store=store, tile_points=3000)
 
@@ -1307,7 +1307,7 @@ def test_a_stop_while_writes_are_in_flight_still_removes_the_temporary_store(
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(tmp))
-    real = R._IngestProgress.__call__
+    real = R.IngestProgress.__call__
     writers = []
 
     def write_on(store, seconds=0.6):  # a write in flight: makes its directories anew
@@ -1331,7 +1331,7 @@ def test_a_stop_while_writes_are_in_flight_still_removes_the_temporary_store(
             raise KeyboardInterrupt
         return real(self, pass_number, points)
 
-    monkeypatch.setattr(R._IngestProgress, "__call__", stop_in_pass_2)
+    monkeypatch.setattr(R.IngestProgress, "__call__", stop_in_pass_2)
     with pytest.raises(KeyboardInterrupt):
         run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, chunk_points=1000)
     writers[0].join()
@@ -1344,14 +1344,14 @@ def test_a_run_stopped_in_its_ingest_ingests_again_and_an_empty_store_dir_is_use
     R = importlib.import_module("tiledsimplify.pipeline.run")
     X, path = bunny
     store = tmp_path / "st.zarr"
-    real = R._IngestProgress.__call__
+    real = R.IngestProgress.__call__
 
     def stop_in_pass_2(self, pass_number, points):
         if pass_number == 2 and points > 0:
             raise KeyboardInterrupt  # Ctrl-C or SIGTERM half-way through the tiles' points
         return real(self, pass_number, points)
 
-    monkeypatch.setattr(R._IngestProgress, "__call__", stop_in_pass_2)
+    monkeypatch.setattr(R.IngestProgress, "__call__", stop_in_pass_2)
     with pytest.raises(KeyboardInterrupt):
         run(path, tmp_path / "o.npy", ratio=0.2, tile_points=3000, chunk_points=1000,
             store=store)
@@ -1395,9 +1395,9 @@ def test_a_long_output_logs_its_progress(bunny, tmp_path, caplog, monkeypatch):
     """The output stage logs every tenth of the kept points written (and, for text, formatted)
     once it has run ``OUTPUT_QUIET`` seconds (0 here); a run's count is the last line's."""
     import importlib
-    run_module = importlib.import_module("tiledsimplify.pipeline.run")
+    progress = importlib.import_module("tiledsimplify.pipeline.progress")
     from tiledsimplify.io import points_out
-    monkeypatch.setattr(run_module, "OUTPUT_QUIET", 0.0)
+    monkeypatch.setattr(progress, "OUTPUT_QUIET", 0.0)
     monkeypatch.setattr(points_out, "TEXT_CHUNK", 1000)
     _, path = bunny
     for suffix, verbs in [(".laz", ["written"]), (".npy", ["written"]),
@@ -1413,7 +1413,7 @@ def test_a_long_output_logs_its_progress(bunny, tmp_path, caplog, monkeypatch):
             assert shares == sorted(set(shares)) and shares[-1] == 100, (suffix, verb, lines)
             assert f"({s.n_output:,} of {s.n_output:,} points)" in mine[-1]
         assert len(lines) <= 10 * len(verbs)
-    monkeypatch.setattr(run_module, "OUTPUT_QUIET", 3600.0)  # a short output stays quiet
+    monkeypatch.setattr(progress, "OUTPUT_QUIET", 3600.0)  # a short output stays quiet
     caplog.clear()
     with caplog.at_level("INFO", logger="tiledsimplify"):
         run(path, tmp_path / "quiet.npy", ratio=0.15, tile_points=1500, workers=2)

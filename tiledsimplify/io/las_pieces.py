@@ -12,7 +12,7 @@ chunks that straddle two pieces, compressed by :meth:`LasLayout.compress` from t
 consecutive pieces. :class:`ChunkWriter`, the LAZ point writer :class:`.las.LasOutput` gives
 ``laspy.LasWriter``, then only appends compressed chunks and writes the chunk table; the
 header grows by each piece's summary (:func:`grow_header`). So on a cluster the workers pack
-and compress and the client writes bytes (:func:`tiledsimplify.pipeline.run._write_output`);
+and compress and the client writes bytes (:func:`tiledsimplify.pipeline.output.write_output`);
 and the file is the one laspy's own writer makes of the same points, byte for byte: each
 chunk is compressed alone either way (tested).
 

@@ -7,6 +7,9 @@
 
 Stages are resumable: an existing, complete store for the same input and settings is reused,
 finished tiles are not recomputed, and the output is rewritten from the stored results.
+
+Beside this module: the checks of the output before the work (:mod:`.output_checks`), the
+stages' progress lines (:mod:`.progress`) and the output's writer (:mod:`.output`).
 """
 
 import collections
@@ -14,7 +17,6 @@ import collections.abc
 import concurrent.futures
 import contextlib
 import contextvars
-import dataclasses
 import hashlib
 import json
 import logging
@@ -39,20 +41,25 @@ from ..core import SimplifyOptions, compile_cache, edge_fit, prethin
 from ..core.refine import edge_cover_radius
 from ..core.result import resolve_target, short_message
 from ..errors import InputError, TiledSimplifyError
-from ..io import points_out
 from ..io.las import LAS_SUFFIXES
-from ..io.points_out import (
-    PointsAt,
-    cannot_write_in,
-    check_not_input,
-    check_output,
-    check_space,
-    record_bytes,
-)
+from ..io.points_out import cannot_write_in, check_not_input, check_output
 from ..io.sources import degrees_message, open_source
 from ..tiles import IncompleteStoreError, TileStore
-from .budget import kept_in_tile, merge_passes, plan_cut, store_pass, store_sequences
-from .input_order import InputRanks
+from .budget import merge_passes, plan_cut, store_pass, store_sequences
+from .output import write_output
+from .output_checks import (
+    bytes_per_point,
+    check_grid,
+    check_layout,
+    check_room,
+    guard_limit,
+    is_empty_dir,
+    regrids,
+    warn_leftovers,
+    warn_read_back,
+    warn_regrid,
+)
+from .progress import IngestProgress, Progress, refine_line, threshold_line, tile_line
 from .tile_refine import (
     MAX_WIDTH,
     clear_kept,
@@ -65,7 +72,6 @@ from .tile_refine import (
     refined_gap,
 )
 from .tile_task import (
-    NORMAL_DTYPE,
     TILE_RESULTS,
     deviation_histogram,
     simplify_tile,
@@ -154,10 +160,6 @@ def _peak_rss_mb():
     return kb / (1024 * 1024) if sys.platform == "darwin" else kb / 1024  # macOS: bytes
 
 
-def _is_empty_dir(path):
-    return path.is_dir() and not any(path.iterdir())
-
-
 def _fingerprint(source, settings):
     h = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode())
     for f in getattr(source, "files", []):
@@ -187,139 +189,6 @@ def _store_differences(config, settings):
              if key not in here or key not in there or here[key] != there[key]]
     return "; ".join(diffs) if diffs else (
         "the same settings, but the input files differ in name, size or modification time")
-
-
-class _Progress:
-    """Per-task progress of one stage: a log line per finished tile (from the calling
-    process, so it is not lost in worker processes) and, on a terminal or in a notebook, a bar
-    redrawn below the log lines (not in log files: cron and Airflow logs get the lines only)."""
-
-    def __init__(self, stage, total, describe, bar, out=None, unit="tiles", points=None):
-        self.stage, self.total, self.describe, self.unit = stage, total, describe, unit
-        self.points_total, self.points = points, 0
-        self.out = sys.stderr if out is None else out
-        interactive = "ipykernel" in sys.modules or (
-            hasattr(self.out, "isatty") and self.out.isatty())
-        self.bar = bool(bar) and interactive
-        self.done = 0
-        self.t0 = time.perf_counter()
-
-    def __call__(self, result):
-        self.done += 1
-        if isinstance(result, dict):
-            self.points += result.get("n_core", 0)
-        if self.bar:
-            self.out.write("\r\033[K")
-        if self.describe is not None:
-            self.describe(result, self.done, self.total, self.pace())
-        if self.bar:
-            self.draw()
-
-    def pace(self):
-        """``"; 12 % of points in 3.2 min, ~23 min left"`` for a log line: the share of the
-        stage's points in the tiles done so far, and the time left at that rate (by points, not
-        tiles: the largest tiles run first, so a count of tiles would overstate the time left);
-        empty when the stage's points are not known."""
-        if not self.points_total or not self.points:
-            return ""
-        frac = min(self.points / self.points_total, 1.0)
-        elapsed = time.perf_counter() - self.t0
-        left = f", ~{_duration(elapsed * (1 - frac) / frac)} left" if frac < 1 else ""
-        return f"; {100 * frac:.0f} % of points in {_duration(elapsed)}{left}"
-
-    def draw(self):
-        frac = self.done / self.total if self.total else 1.0
-        elapsed = time.perf_counter() - self.t0
-        left = elapsed * (1 - frac) / frac if frac else float("nan")
-        width = 30
-        fill = int(round(width * frac))
-        self.out.write(f"\r{self.stage} [{'#' * fill}{' ' * (width - fill)}] {self.done:,}/"
-                       f"{self.total:,} {self.unit} {100 * frac:3.0f}% | {elapsed:.0f} s"
-                       + (f", ~{left:.0f} s left" if 0 < frac < 1 else ""))
-        self.out.flush()
-
-    def close(self):
-        if self.bar:
-            self.out.write("\n")
-            self.out.flush()
-
-
-#: the output stage logs its progress (every tenth of the kept points written) only once it
-#: has run this long: a short one stays one line in the run's summary
-OUTPUT_QUIET = 10.0
-
-
-class _Written:
-    """The output stage's progress: ``written(points so far)`` logs a line at every tenth of
-    the ``total`` kept points, once it has run :data:`OUTPUT_QUIET` seconds (writing 200M kept
-    points of a billion takes minutes, with no task per point to count); ``verb`` says what
-    was done to them (text outputs are formatted at the end, ~5 µs a point)."""
-
-    def __init__(self, total, verb="written"):
-        self.total, self.verb, self.tenths, self.t0 = int(total), verb, 0, time.perf_counter()
-
-    def __call__(self, done):
-        tenths = 10 * done // self.total if self.total else 10
-        if tenths <= self.tenths:
-            return
-        elapsed = time.perf_counter() - self.t0
-        if elapsed < OUTPUT_QUIET:
-            return
-        self.tenths = tenths
-        frac = done / self.total if self.total else 1.0
-        left = f", ~{_duration(elapsed * (1 - frac) / frac)} left" if 0 < frac < 1 else ""
-        log.info("output: %d %% (%s of %s points) %s in %s%s", 100 * frac, f"{done:,}",
-                 f"{self.total:,}", self.verb, _duration(elapsed), left)
-
-
-def _duration(seconds):
-    """``41 s``, ``12.3 min`` or ``2.1 h``."""
-    if seconds < 90:
-        return f"{seconds:.0f} s"
-    if seconds < 5400:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"
-
-
-class _IngestProgress:
-    """``TileStore.create``'s ``progress(pass, points)``: a log line at every tenth of each of
-    its two passes over the input (100M points took 90 s) and, on a terminal, a bar."""
-
-    PASSES = {1: "bounds and sample", 2: "points to tiles"}
-
-    def __init__(self, n, bar, out=None):
-        self.n, self.bar, self.out = n, bar, out
-        self.report, self.pass_number, self.tenths = None, None, 0
-
-    def __call__(self, pass_number, points):
-        if pass_number != self.pass_number:
-            # between the passes: the plan and the store's layout (5 s at 100M points)
-            gap = None if self.report is None else time.perf_counter() - self.report.last
-            self.close()
-            if gap is not None:
-                log.info("ingest: tiles planned and the store laid out in %.1f s (spacing and "
-                         "kd split from the sample, a zarr group a tile)", gap)
-            self.report = _Progress(f"ingest {pass_number}/2", self.n, None, self.bar,
-                                    out=self.out, unit="points")
-            self.pass_number, self.tenths = pass_number, 0
-        r = self.report
-        r.done = points
-        r.last = time.perf_counter()
-        tenths = 10 * points // self.n if self.n else 10
-        if tenths > self.tenths:
-            self.tenths = tenths
-            if r.bar:
-                r.out.write("\r\033[K")
-            log.info("ingest pass %d of 2 (%s): %d %% (%s of %s points) in %.1f s",
-                     pass_number, self.PASSES[pass_number], 100 * points // max(self.n, 1),
-                     f"{points:,}", f"{self.n:,}", time.perf_counter() - r.t0)
-        if r.bar:
-            r.draw()
-
-    def close(self):
-        if self.report is not None:
-            self.report.close()
-            self.report = None
 
 
 #: a parallel ingest cuts the input in parts of at least this many points (whole chunks)
@@ -359,7 +228,7 @@ def _ingest_parts(source, n, scheduler, workers, client):
 
 def _parts_mapper(scheduler, workers, client, ingest):
     """``map_parts`` of :meth:`.TileStore.create` on the run's scheduler: a pass is one task
-    per part, reported to ``ingest`` (:class:`_IngestProgress`) as each part ends; "pass"
+    per part, reported to ``ingest`` (:class:`IngestProgress`) as each part ends; "pass"
     0, the store's layout in batches of tiles, is not reported."""
 
     def run(func, args, pass_number):
@@ -521,7 +390,7 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
     """Run dask delayed ``tasks`` on the chosen scheduler; returns their results in order.
 
     ``describe(result, done, total, pace)`` is called in this process as each task finishes
-    (any scheduler); ``pace`` is :meth:`_Progress.pace` when ``points``, the stage's core
+    (any scheduler); ``pace`` is :meth:`Progress.pace` when ``points``, the stage's core
     points (the sum of the results' ``n_core``), is given. ``progress`` adds a bar on a
     terminal.
     """
@@ -529,7 +398,7 @@ def _compute(tasks, scheduler, workers, client, progress, stage="tiles", describ
         from distributed import Client
         with Client(scheduler) as c:
             return _compute(tasks, None, workers, c, progress, stage, describe, points)
-    report = _Progress(stage, len(tasks), describe, progress, points=points)
+    report = Progress(stage, len(tasks), describe, progress, points=points)
     if report.bar:
         report.draw()
     try:
@@ -724,31 +593,6 @@ def _tile_tasks(func, tiles, weight, args, after=None):
         tasks[i] = dask.delayed(func, pure=False)(
             *args(i), **kw, dask_key_name=f"{name}-{r:07d}-{i}-{token}")
     return list(tasks.values())
-
-
-def _tile_line(result, done, total, pace=""):
-    log.info("tile %d (%d/%d): %d core + %d halo points, %d boundary, %d removals%s, %.1f s%s",
-             result["tile"], done, total, result["n_core"], result["n_halo"],
-             result["n_boundary"], result["steps"],
-             " (all)" if result["exhausted"] else f" (up to level {result['level']:.3g})",
-             result["seconds"], pace)
-
-
-def _refine_line(result, done, total, pace=""):
-    if result["beyond"]:
-        log.info("tile %d (%d/%d): its gap under the cut, or an earlier neighbour's, lies "
-                 "beyond the halo; refined once the cut's gaps are measured%s",
-                 result["tile"], done, total, pace)
-        return
-    log.info("refined tile %d (%d/%d): %d core + %d halo points, %d kept fixed, %d swaps, "
-             "Hausdorff %.4g -> %.4g, %.1f s%s", result["tile"], done, total,
-             result["n_core"], result["n_halo"], result["n_fixed"], result["swaps"],
-             result["hausdorff_before"], result["hausdorff_after"], result["seconds"], pace)
-
-
-def _threshold_line(result, done, total, pace=""):
-    log.info("neighbourhoods of tile %d (%d/%d): %d points in %.1f s%s", result["tile"], done,
-             total, result["n_points"], result["seconds"], pace)
 
 
 def default_tile_points(n):
@@ -953,11 +797,11 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          f"first runs down to), got {floor!r}; the default is 0.5.")
     check_output(output, LAS_SUFFIXES)
     check_not_input(output, source.files)
-    _warn_read_back(input, output, source)
-    _warn_leftovers(output)
-    _check_layout(output, source)
-    _warn_regrid(output, source)
-    _check_room(output, target * _record_bytes(output, source), store, n)
+    warn_read_back(input, output, source)
+    warn_leftovers(output)
+    check_layout(output, source)
+    warn_regrid(output, source)
+    check_room(output, target * bytes_per_point(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
     if workers is not None and workers < 1:
         raise InputError(f"workers must be at least 1 (local threads or processes), got "
@@ -1014,7 +858,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 tile_points=int(tile_points)),
                 getattr(client.scheduler, "address", "the scheduler"), store_path.parent)
         ts, again = None, False
-        if _is_empty_dir(store_path):  # made beforehand (mkdir -p): a new store goes there
+        if is_empty_dir(store_path):  # made beforehand (mkdir -p): a new store goes there
             pass
         elif store_path.exists() and not (store_path / "zarr.json").is_file():
             # (a file was refused before the lock); TileStore.open said "no tile store at"
@@ -1040,7 +884,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 log.info("resuming from %s: %d of %d tiles done", store_path,
                          len(ts.done_tiles()), ts.n_tiles)
         if ts is None:
-            ingest = _IngestProgress(n, progress)
+            ingest = IngestProgress(n, progress)
             parts = _ingest_parts(source, n, scheduler, workers, client)
             try:
                 ts = TileStore.create(
@@ -1057,7 +901,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                      time.perf_counter() - clock[0],
                      "" if parts is None else f", {len(parts)} parts read at once")
         stage("ingest")
-        _check_grid(output, source, ts)
+        check_grid(output, source, ts)
         degrees = degrees_message(input, *ts.root_attrs["bounds"])
         if degrees:
             log.warning("%s", degrees)
@@ -1086,7 +930,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if threshold is None and options.detect_boundary and options.mode == "paper":
             done = _compute(_tile_tasks(deviation_histogram, range(ts.n_tiles), ts.count,
                                         lambda i: (str(store_path), i, opts)),
-                            scheduler, workers, client, progress, "neighbours", _threshold_line,
+                            scheduler, workers, client, progress, "neighbours", threshold_line,
                             points=n)
             threshold = threshold_from_histogram(np.sum([d["hist"] for d in done], axis=0),
                                                  options.boundary_k, options.boundary_floor)
@@ -1107,7 +951,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             _compute(_tile_tasks(simplify_tile, pending, ts.count, lambda i: (
                 str(store_path), i, opts, thr, ("keep", math.ceil(keep_fraction * ts.count(i))),
                 share)),
-                scheduler, workers, client, progress, "tiles", _tile_line,
+                scheduler, workers, client, progress, "tiles", tile_line,
                 points=sum(ts.count(i) for i in pending))
             log.info("simplified %d tiles in %.1f s", len(pending), time.perf_counter() - clock[0])
         stage("tiles")
@@ -1128,7 +972,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                      len(need))
             _compute(_tile_tasks(simplify_tile, sorted(need), ts.count, lambda i: (
                 str(store_path), i, opts, thr, ("level", need[i]), share)),
-                scheduler, workers, client, progress, "deeper", _tile_line,
+                scheduler, workers, client, progress, "deeper", tile_line,
                 points=sum(ts.count(i) for i in need))
         else:
             raise TiledSimplifyError(
@@ -1149,7 +993,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             finally:  # the passes' cache of kept flags in this process (a cluster's
                 clear_kept()  # workers keep theirs, at most KEPT_CACHE_BYTES, to their end)
         stage("refine")
-        n_out, n_boundary = _write_output(ts, source, output, prefix, refined, client)
+        n_out, n_boundary = write_output(ts, source, output, prefix, refined, client)
         stage("output")
     except concurrent.futures.CancelledError as exc:  # distributed's FutureCancelledError
         if client is None or getattr(exc, "reason", None) != "scheduler-connection-lost":
@@ -1231,7 +1075,7 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress, edge_r
                                         ts.count, lambda i: (str(store_path), i, hausdorff,
                                                              earlier[i], width, edge_radius),
                                         earlier.get),
-                            scheduler, workers, client, progress, "refine", _refine_line,
+                            scheduler, workers, client, progress, "refine", refine_line,
                             points=sum(ts.count(i) for i in pending))
         return done, pending, int(phase.max()) + 1 if len(phase) else 0
 
@@ -1285,265 +1129,6 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress, edge_r
     return True
 
 
-#: the columns of a non-LAS output after x, y, z (normals as the tile store keeps them)
-OUTPUT_COLUMNS = {"sharp_edge": np.uint8, "nx": NORMAL_DTYPE, "ny": NORMAL_DTYPE,
-                  "nz": NORMAL_DTYPE}
-
-
-#: bytes a new tile store takes on disk per input point, at least: its compressed
-#: coordinates, input indices and per-point results took 43 B a point for the 1M scan of
-#: ``benchmarks/pipeline_speed.py`` and lone-star.laz, 51 B for autzen_trim.laz
-STORE_BYTES = 20
-
-
-def _warn_read_back(input, output, source):
-    """Warn when the output goes where the input names its files (a folder or pattern of
-    LAS/LAZ tiles): a later run on the same input would read it as one more tile; and when
-    it is named as a COPC file, which it is not."""
-    if output.name.lower().endswith(".copc.laz"):
-        log.warning("%s: written as a plain LAZ file, not as COPC (no octree); name it "
-                    "*.laz, or make COPC from it with `pdal translate %s out.copc.laz`.",
-                    output, output.name)
-    if source.is_las:
-        from ..io.las import lists_path
-        if lists_path(input, output):  # (an input file itself: refused before)
-            log.warning("%s: the output goes where the input %s names its files; a later run "
-                        "on the same input will read it as one more input file. Write it to "
-                        "another folder.", output, input)
-
-
-def _warn_leftovers(output):
-    """Warn of the temporary files a killed run writing ``output`` left beside it: the
-    output's ``.NAME.*.partial`` and a text output's ``.NAME.*.records`` are removed when a run
-    fails or is stopped, but not after SIGKILL (the OOM killer, a batch system past its grace
-    period), and a rerun wrote new ones beside them: a killed run's kept points, whole, per
-    file. Not deleted here: another run may be writing the same output."""
-    try:
-        left = sorted(p for pattern in (f".{output.name}.*.partial", f".{output.name}.*.records")
-                      for p in output.parent.glob(pattern) if p.is_file())
-    except OSError:
-        return
-    if left:
-        size = sum(p.stat().st_size for p in left)
-        log.warning("%s: %d temporary file(s) of an earlier run that was killed while writing "
-                    "it take %.1f MB beside it (%s); delete them unless another run is writing "
-                    "%s now.", output, len(left), size / 1e6, ", ".join(p.name for p in left),
-                    output.name)
-
-
-def _warn_regrid(output, source):
-    """Warn when a LAS/LAZ output moves points of input files on another grid than the
-    first file's, which it takes (:func:`regrids`): a file of finer scales, or offsets off
-    the first file's steps, has its kept points rounded to that grid — up to half a step on
-    each axis — where a folder merging two deliveries lost their precision silently."""
-    if output.suffix.lower() not in LAS_SUFFIXES or not source.is_las:
-        return
-    steps, origin = source.scales, source.offsets
-    moved = _off_grid_files(source)
-    if moved:
-        log.warning(
-            "%s: %d input file(s) are on another grid than the first file's (%s: scales %s, "
-            "offsets %s), which the output takes: their kept points move by up to half a step "
-            "on each axis (%s: scales %s, offsets %s%s). Give the files one scale and offset "
-            "first (e.g. `pdal translate in.laz out.laz --writers.las.scale_x=… "
-            "--writers.las.offset_x=…`).", output, len(moved), source.infos[0].path.name,
-            steps.tolist(), origin.tolist(), moved[0].path.name,
-            np.asarray(moved[0].scales).tolist(), np.asarray(moved[0].offsets).tolist(),
-            "" if len(moved) == 1 else f"; and {len(moved) - 1} more")
-
-
-def _check_layout(output, source):
-    """Refuse now, not after the work, a LAS/LAZ output the writer would refuse at the end:
-    input files of different point formats or dimensions (no one layout holds them), or an
-    input dimension that clashes with one the output adds (:func:`.las.output_header`)."""
-    if output.suffix.lower() in LAS_SUFFIXES and source.is_las:
-        from ..io.las import output_header
-        output_header(source.template_header(), path=output)
-
-
-def _check_grid(output, source, ts):
-    """After the ingest, before the tiles: refuse a LAS/LAZ output whose grid (the first
-    file's scales and offsets) cannot hold the input's coordinates — files far apart with
-    their own offsets. The bounds are those the ingest read from the points (headers' bounds
-    may be wrong or zero)."""
-    if output.suffix.lower() in LAS_SUFFIXES and source.is_las:
-        from ..io.las_pieces import fits_grid, off_grid
-        lo, hi = ts.root_attrs["bounds"]
-        if not fits_grid(lo, hi, source.scales, source.offsets):  # the template's
-            raise off_grid(output, lo, hi, source.scales, source.offsets)
-
-
-def _off_grid_files(source):
-    """The files of a LAS ``source`` whose points the first file's grid (the output's) moves
-    by up to half a step: finer scales, or offsets off its steps (a coarser multiple at whole
-    steps moves them by rounding only)."""
-    steps, origin = source.scales, source.offsets
-    moved = []
-    for info in source.infos[1:]:
-        ratio = np.asarray(info.scales, dtype=np.float64) / steps
-        shift = (np.asarray(info.offsets, dtype=np.float64) - origin) / steps
-        if not (np.allclose(ratio, np.round(ratio), rtol=0, atol=1e-6) and np.all(ratio >= 1)
-                and np.allclose(shift, np.round(shift), rtol=0, atol=1e-6)):
-            moved.append(info)
-    return moved
-
-
-def regrids(output, source):
-    """Whether the output puts the kept points on a grid they were not read from: a LAS/LAZ
-    output of a non-LAS input, or of LAS files on other scales or offsets than the first's
-    (whose grid the output takes); a LAS input's records are otherwise kept as read. Stricter
-    than :func:`_off_grid_files` (which warns of visible moves): a file on a coarser multiple
-    of the grid is re-quantised too, and its points move by rounding — what the guard's bound
-    (:func:`guard_limit`) must allow for."""
-    if output.suffix.lower() not in LAS_SUFFIXES:
-        return False
-    return not source.is_las or not all(
-        np.array_equal(i.scales, source.scales) and np.array_equal(i.offsets, source.offsets)
-        for i in source.infos)
-
-
-def guard_limit(limit, output, source, ts):
-    """The distance the tiles' ``max_spacing`` guard works to: ``limit``, less the most a
-    LAS/LAZ output's quantisation moves a kept point where it puts points on a grid they
-    were not read from — a non-LAS input (:func:`.las.new_header`: a thousandth of the
-    spacing) or LAS files on other scales or offsets than the first's, whose grid the output
-    takes. Half a step on each axis, and the rounding of ``X * scale + offset`` read back:
-    the points of the file then still lie within ``limit`` of every input point (on the
-    Bunny at 2 spacings, 2 points were 2.4e-7 beyond it, the step 1e-6). A limit that
-    move alone could break is refused."""
-    if not regrids(output, source):
-        return limit
-    lo, hi = (np.asarray(b, dtype=np.float64) for b in ts.root_attrs["bounds"])
-    if source.is_las:
-        scales = source.scales
-    else:
-        from ..io.las import new_header
-        scales = np.asarray(new_header(lo, hi, ts.spacing).scales, dtype=np.float64)
-    move = float(0.5 * np.linalg.norm(scales)
-                 + 4 * np.linalg.norm(np.spacing(np.maximum(np.abs(lo), np.abs(hi)))))
-    if not limit > move:
-        raise InputError(
-            f"{output}: --max-spacing {limit:g} (options.max_spacing) is within what the LAS "
-            f"output's grid (scales {scales.tolist()}) moves a kept point ({move:.3g}); write "
-            ".ply, .npy, .xyz or .csv (coordinates as read), or give a larger distance.")
-    log.info("the max_spacing guard works to %.9g: the LAS output's grid moves a kept point "
-             "by up to %.3g", limit - move, move)
-    return limit - move
-
-
-def _check_room(output, output_bytes, store, n):
-    """Refuse now, not hours in, if the output's directory or a new tile store's (the
-    temporary directory by default) cannot hold a lower bound of what they will take; on
-    one file system, of both."""
-    check_space(output, output_bytes)
-    if store is not None and Path(store).exists() and not _is_empty_dir(Path(store)):
-        return  # a resumed store: already (mostly) written
-    at = Path(store) if store is not None else Path(tempfile.gettempdir()) / "store"
-    need = n * STORE_BYTES
-    same = os.stat(points_out.existing_parent(at)).st_dev == os.stat(
-        points_out.existing_parent(output)).st_dev
-    what = f"the {'' if store is not None else 'temporary '}tile store of {n:,} points"
-    if same:
-        need += output_bytes
-        what += " (with the output, on the same file system)"
-    fix = ("give --store a directory with room" if store is not None else
-           "set TMPDIR (or give --store) to a directory with room")
-    check_space(at, need, what, fix, name=None if store is not None else at.parent)
-
-
-def _record_bytes(output, source):
-    """A lower bound of the output's bytes per kept point: its record (LAS: the input's
-    point record, before compression — none is assumed for LAZ)."""
-    suffix = output.suffix.lower()
-    if suffix == ".laz":
-        return 0
-    if suffix in LAS_SUFFIXES:  # a non-LAS input gets point format 6 (30 bytes) and 17 more
-        return source.template_header().point_format.size if source.is_las else 30 + 17
-    return record_bytes(OUTPUT_COLUMNS)
-
-
-def _keep(ts, tile, prefix, refined):
-    return ts.read_refined(tile)[0] if refined else kept_in_tile(ts, tile, prefix)
-
-
-def _kept(ts, tile, prefix, refined):
-    return _keep(ts, tile, prefix, refined), ts.read_result(tile, "boundary")
-
-
-def _tile_piece(store_path, tile, prefix, refined, layout, is_las, start=None, expect=None):
-    """What a LAS/LAZ output takes from one tile: ``(piece, boundary count)`` — its kept core
-    points packed as the output's point records (:meth:`.LasLayout.pack`: quantised, checked,
-    with the three added dimensions; a non-LAS input's points get the dimensions it carried,
-    else :data:`~tiledsimplify.io.las.NEW_POINT_DEFAULTS`) — or None if it keeps none. Made
-    wherever this runs: on a cluster, a worker. With ``start``, the file's point where the
-    tile's first kept point goes (a LAZ output on a cluster, :func:`_write_laz_chunks`), the
-    piece is cut at the file's chunk boundaries and its whole chunks compressed
-    (:meth:`.LasLayout.chunked`); it must then keep ``expect`` points."""
-    from ..io.las import NEW_POINT_DEFAULTS
-    ts = TileStore.open(store_path)
-    keep, boundary = _kept(ts, tile, prefix, refined)
-    if expect is not None and int(keep.sum()) != expect:
-        raise TiledSimplifyError(
-            f"{store_path}: tile {tile} keeps {int(keep.sum())} points, not the {expect} its "
-            "cut says (a bug: the output's LAZ chunks would be misplaced)")
-    if not keep.any():
-        return None
-    xyz = ts.core_xyz(tile)[keep]
-    boundary = boundary[keep]
-    k = len(xyz)
-    if is_las:
-        attrs = {name: values[keep] for name, values in ts.attrs(tile).items()}
-    else:  # a new LAS 1.4 layout: the dimensions the input carried (E57 intensity, colour)
-        stored = ts.attrs(tile, [name for name in layout.attribute_names
-                                 if name in ts.attribute_names])
-        attrs = {name: stored[name][keep] if name in stored
-                 else np.full(k, NEW_POINT_DEFAULTS.get(name, 0))
-                 for name in layout.attribute_names}
-    piece = layout.pack(xyz, attrs, {"sharp_edge": boundary.astype(np.uint8),
-                                     "importance": np.full(k, np.nan),
-                                     "simplify_rank": np.full(k, -1, dtype=np.int64)})
-    if start is not None:
-        piece = layout.chunked(piece, start)
-    return piece, int(boundary.sum())
-
-
-def _piece_part(got, part):
-    """A part of a cut piece (:func:`_tile_piece` with ``start``): ``"head"`` or ``"tail"``
-    (records, for a chunk that straddles pieces), or ``"body"``: the piece without them and
-    its boundary count (what the client writes)."""
-    if got is None:
-        return b"" if part == "head" else None
-    piece, boundary = got
-    if part != "body":
-        return getattr(piece, part)
-    # a copy: the same object may be the head's or tail's task's input in this worker
-    return dataclasses.replace(piece, head=b"", tail=None), boundary
-
-
-#: tiles read ahead of the one being written, per worker (each a tile's kept records)
-READ_AHEAD = 2
-
-
-def _in_tile_order(func, args, n, client):
-    """``func(*args(i))`` for ``i`` in ``0..n-1``, yielded in that order: on a cluster computed
-    by its workers, at most ``READ_AHEAD`` per worker ahead of the consumer, so the client only
-    writes; else here, one after another (read ahead in threads here, the output stage of the
-    3M-point scan was within noise of this: zarr's reads go through one event loop)."""
-    if client is None:
-        for i in range(n):
-            yield func(*args(i))
-        return
-    ahead = READ_AHEAD * max(1, sum(client.nthreads().values()))
-    pending = collections.deque(client.submit(func, *args(i), pure=False)
-                                for i in range(min(ahead, n)))
-    for i in range(n):
-        fut = pending.popleft()
-        if i + ahead < n:
-            pending.append(client.submit(func, *args(i + ahead), pure=False))
-        yield fut.result()
-        del fut
-
-
 #: tasks per worker thread in each pass of the global cut on a cluster (:func:`_cut_scan`)
 CUT_TASKS = 4
 
@@ -1563,126 +1148,4 @@ def _cut_scan(store_path, tiles, client):
             store_pass, [store_path] * len(batches), batches, lo=lo, bits=bits, final=final,
             pure=False)))
     return scan
-
-
-def _write_output(ts, source, output, prefix, refined=False, client=None):
-    """Write the kept core points of every tile: the refined flags if ``refined``, else the
-    cut's. LAS/LAZ tile by tile, the other formats in input order at each point's rank
-    (:class:`.input_order.InputRanks`, :class:`~tiledsimplify.io.points_out.PointsAt`), in
-    memory bounded by a tile; on a cluster the tiles' kept records are read — and for
-    LAS/LAZ packed as point records (:func:`_tile_piece`) — ahead by its workers
-    (:func:`_in_tile_order`), which also compress a LAZ output's chunks
-    (:func:`_write_laz_chunks`)."""
-    n_out = n_boundary = 0
-    path = str(ts.path)
-    # a tile keeps its core count less its cut (the refinement swaps at equal count)
-    counts = [ts.count(t) - int(prefix[t]) for t in range(ts.n_tiles)]
-    written = _Written(sum(counts))
-    if output.suffix.lower() in LAS_SUFFIXES:
-        from ..io.las import LasOutput, new_header
-        if source.is_las:
-            template = source.template_header()
-        else:  # a new LAS 1.4 layout: the input had no point records to keep
-            lo, hi = ts.root_attrs["bounds"]
-            template = new_header(lo, hi, ts.spacing, colour=all(
-                c in ts.attribute_names for c in ("red", "green", "blue")))
-        with LasOutput(output, template) as out:
-            if client is not None and output.suffix.lower() == ".laz":
-                return _write_laz_chunks(ts, out, prefix, refined, source.is_las, client,
-                                         counts, written)
-            for got in _in_tile_order(
-                    _tile_piece, lambda i: (path, i, prefix, refined, out.layout, source.is_las),
-                    ts.n_tiles, client):
-                if got is None:
-                    continue
-                piece, boundary = got
-                out.write_piece(piece)
-                n_out += piece.count
-                n_boundary += boundary
-                written(n_out)
-        return n_out, n_boundary
-    # in input order, a tile at a time
-    ranks = InputRanks(ts.n_total)
-    for index in _in_tile_order(_tile_kept_index, lambda i: (path, i, prefix, refined),
-                                ts.n_tiles, client):
-        ranks.add(index)
-    n_out = len(ranks)
-    done = 0
-    with PointsAt(output, n_out, OUTPUT_COLUMNS, progress=_Written(n_out, "formatted as text")
-                  ) as out:
-        for idx, xyz, boundary, nrm in _in_tile_order(
-                _tile_points, lambda i: (path, i, prefix, refined), ts.n_tiles, client):
-            out.write(ranks.rank(idx), xyz, {
-                "sharp_edge": boundary.astype(np.uint8),
-                "nx": nrm[:, 0], "ny": nrm[:, 1], "nz": nrm[:, 2]})
-            n_boundary += int(boundary.sum())
-            done += len(idx)
-            written(done)
-    return n_out, n_boundary
-
-
-def _write_laz_chunks(ts, out, prefix, refined, is_las, client, counts, written):
-    """A LAZ output on a cluster, compressed by its workers: each tile's kept points
-    (``counts``) are packed and cut at the file's chunk boundaries there (:func:`_tile_piece`
-    with the file's point where they start), its whole chunks compressed; each chunk that
-    straddles tiles is compressed by a task from the tail of one and the heads of the next
-    (:meth:`.LasLayout.compress`). The client writes the chunks in order and grows the header
-    by each tile's summary: the file laspy would write (:class:`.las_pieces.ChunkWriter`). ``READ_AHEAD`` tiles per worker
-    thread are in flight. Returns ``(points, boundary points)``."""
-    from ..io.las_pieces import straddles
-    n = ts.n_tiles
-    starts, span = straddles(counts, out.layout.vlr().chunk_size())
-    path = str(ts.path)
-    ahead = READ_AHEAD * max(1, sum(client.nthreads().values()))
-    pieces, bodies, spans = {}, {}, {}
-    straddling = sorted(span)
-    made = [0, 0]  # pieces submitted, straddling chunks submitted
-
-    def submit(upto):
-        while made[0] < min(upto, n):
-            t = made[0]
-            pieces[t] = client.submit(_tile_piece, path, t, prefix, refined, out.layout,
-                                      is_las, int(starts[t]), counts[t], pure=False)
-            bodies[t] = client.submit(_piece_part, pieces[t], "body", pure=False)
-            made[0] += 1
-        while made[1] < len(straddling) and span[straddling[made[1]]].stop <= made[0]:
-            t = straddling[made[1]]
-            parts = [client.submit(_piece_part, pieces[t], "tail", pure=False)]
-            parts += [client.submit(_piece_part, pieces[u], "head", pure=False)
-                      for u in span[t]]
-            spans[t] = client.submit(out.layout.compress, parts, pure=False)
-            made[1] += 1
-
-    n_out = n_boundary = 0
-    for t in range(n):
-        submit(t + ahead)
-        got = bodies.pop(t).result()
-        if got is not None:
-            piece, boundary = got
-            out.write_chunks(piece.data, piece.chunks)
-            out.grow(piece)
-            n_out += piece.count
-            n_boundary += boundary
-            written(n_out)
-        if t in span:
-            submit(span[t].stop)
-            out.write_chunks(*spans.pop(t).result())
-        del pieces[t]  # its parts are asked for: dask keeps what they still need
-    return n_out, n_boundary
-
-
-def _tile_kept_index(store_path, tile, prefix, refined):
-    """The input indices of a tile's kept core points (read where this runs)."""
-    ts = TileStore.open(store_path)
-    return ts.core_index(tile)[_keep(ts, tile, prefix, refined)]
-
-
-def _tile_points(store_path, tile, prefix, refined):
-    """A tile's kept core points for a non-LAS output: ``(index, xyz, boundary, normals)``
-    (read where this runs)."""
-    ts = TileStore.open(store_path)
-    keep, boundary = _kept(ts, tile, prefix, refined)
-    xyz, idx = ts.core(tile)
-    return idx[keep], xyz[keep], boundary[keep], ts.read_result(tile, "normal")[keep]
-
 
