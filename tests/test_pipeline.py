@@ -1338,6 +1338,41 @@ def test_a_stop_while_writes_are_in_flight_still_removes_the_temporary_store(
     assert list(tmp.iterdir()) == [] and not (tmp_path / "o.npy").exists()
 
 
+def test_the_temporary_store_knows_how_the_run_ended(bunny, tmp_path, monkeypatch):
+    """A stopped or failed run deletes its temporary store until it stays deleted for
+    ``REMOVE_QUIET`` s (writes in flight make it anew); a run that ends well at once. Until
+    2026-12-07 the run closed its contexts as if it had ended well whatever happened, so a
+    stopped run never waited: the test above failed on a loaded machine (1 of 8 runs beside
+    three busy processes on two cores), the store left in TMPDIR without a warning."""
+    import importlib
+    import tempfile
+    R = importlib.import_module("tiledsimplify.pipeline.run")
+    _, path = bunny
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    quiet = []
+    real_remove = R._remove_tree
+    monkeypatch.setattr(R, "_remove_tree",
+                        lambda p, quiet=0.0: quiet_and(p, quiet))
+
+    def quiet_and(p, q):
+        quiet.append(q)
+        return real_remove(p, quiet=q)
+    run(path, tmp_path / "ok.npy", ratio=0.2, tile_points=3000)
+    real = R.IngestProgress.__call__
+
+    def stop_in_pass_2(self, pass_number, points):
+        if pass_number == 2 and points > 0:
+            raise KeyboardInterrupt
+        return real(self, pass_number, points)
+    monkeypatch.setattr(R.IngestProgress, "__call__", stop_in_pass_2)
+    with pytest.raises(KeyboardInterrupt):
+        run(path, tmp_path / "stopped.npy", ratio=0.2, tile_points=3000)
+    assert quiet == [0.0, R.REMOVE_QUIET] and R.REMOVE_QUIET > 0
+    assert list(tmp.iterdir()) == [] and not (tmp_path / "stopped.npy").exists()
+
+
 def test_a_run_stopped_in_its_ingest_ingests_again_and_an_empty_store_dir_is_used(
         bunny, tmp_path, monkeypatch, caplog):
     import importlib

@@ -616,6 +616,9 @@ LOCAL_SPARE_MB = 300
 #: seconds a stopped run tries to delete its temporary tile store while writes in flight
 #: (zarr's I/O thread) still fill it
 REMOVE_WAIT = 5.0
+#: seconds the deleted store of a stopped run must stay deleted (else it is deleted again):
+#: writes in flight make its directories anew
+REMOVE_QUIET = 0.2
 
 
 @contextlib.contextmanager
@@ -634,17 +637,19 @@ def _temporary_directory():
         yield path
         failed = False
     finally:
-        _remove_tree(path, settle=0.2 if failed else 0.0)
+        _remove_tree(path, quiet=REMOVE_QUIET if failed else 0.0)
 
 
-def _remove_tree(path, settle=0.0):
-    """Delete ``path``; after a failure, wait ``settle`` s and look again (writes in flight
-    can make it anew), up to :data:`REMOVE_WAIT` s; a warning if it cannot."""
+def _remove_tree(path, quiet=0.0):
+    """Delete ``path`` until it stays deleted for ``quiet`` s (after a failure, writes in
+    flight can make it anew: each time it is deleted again), for up to :data:`REMOVE_WAIT` s;
+    a warning if it cannot."""
     deadline = time.monotonic() + REMOVE_WAIT
     while True:
         shutil.rmtree(path, ignore_errors=True)
-        if settle:
-            time.sleep(settle)
+        gone = time.monotonic()
+        while not os.path.lexists(path) and time.monotonic() - gone < quiet:
+            time.sleep(0.02)
         if not os.path.lexists(path):
             return True
         if time.monotonic() > deadline:
@@ -837,6 +842,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     fp = _fingerprint(source, settings)
 
     held = contextlib.ExitStack()  # closed at the end: the lock, the temporary store, a client
+    failure = None  # the exception the run ends with, which the contexts are told of
     try:
         if client is None and isinstance(scheduler, str) and scheduler.startswith("tcp://"):
             client = held.enter_context(_connect(scheduler))  # one connection for every stage
@@ -996,6 +1002,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         n_out, n_boundary = write_output(ts, source, output, prefix, refined, client)
         stage("output")
     except concurrent.futures.CancelledError as exc:  # distributed's FutureCancelledError
+        failure = exc
         if client is None or getattr(exc, "reason", None) != "scheduler-connection-lost":
             raise
         # was a traceback (and, being no error of ours, no --summary for a pipeline to read)
@@ -1006,8 +1013,16 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                 "Give --store DIR to make a long run resumable." if store is None else
                 f"The finished tiles stay in {store_path}: run the same command once the "
                 "scheduler is back to go on from them.")) from None
+    except BaseException as exc:
+        failure = exc
+        raise
     finally:
-        held.close()
+        if failure is None:
+            held.close()
+        else:  # the contexts are told: ``close()`` told them the run ended well, so a stopped
+            # run's temporary store went at once, and writes in flight made it anew (until
+            # 2026-12-07; :func:`_temporary_directory`)
+            held.__exit__(type(failure), failure, failure.__traceback__)
     seconds["total"] = time.perf_counter() - t_start
     cpu_seconds["total"] = sum(cpu_seconds.values())
     if by_guard:
