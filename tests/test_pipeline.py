@@ -1351,14 +1351,13 @@ def test_the_temporary_store_knows_how_the_run_ended(bunny, tmp_path, monkeypatc
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(tmp))
-    quiet = []
+    windows = []  # the quiet window each run's deletion asks for
     real_remove = R._remove_tree
-    monkeypatch.setattr(R, "_remove_tree",
-                        lambda p, quiet=0.0: quiet_and(p, quiet))
 
-    def quiet_and(p, q):
-        quiet.append(q)
-        return real_remove(p, quiet=q)
+    def remove(store, quiet=0.0):
+        windows.append(quiet)
+        return real_remove(store, quiet=quiet)
+    monkeypatch.setattr(R, "_remove_tree", remove)
     run(path, tmp_path / "ok.npy", ratio=0.2, tile_points=3000)
     real = R.IngestProgress.__call__
 
@@ -1369,7 +1368,7 @@ def test_the_temporary_store_knows_how_the_run_ended(bunny, tmp_path, monkeypatc
     monkeypatch.setattr(R.IngestProgress, "__call__", stop_in_pass_2)
     with pytest.raises(KeyboardInterrupt):
         run(path, tmp_path / "stopped.npy", ratio=0.2, tile_points=3000)
-    assert quiet == [0.0, R.REMOVE_QUIET] and R.REMOVE_QUIET > 0
+    assert windows == [0.0, R.REMOVE_QUIET] and R.REMOVE_QUIET > 0
     assert list(tmp.iterdir()) == [] and not (tmp_path / "stopped.npy").exists()
 
 
