@@ -10,7 +10,7 @@ tiles), in this process:
   writing each node's ``zarr.json`` with ``mkdir`` and ``write_bytes`` (the same bytes);
 - getting every tile's arrays in a part of the input that touches every tile (a scan-ordered
   file): each opened from its ``zarr.json`` (until 2026-12-03) against made from the
-  metadata of tile 0 (``store._array_at``, what a part does now).
+  metadata of tile 0 (``tiles.layout.array_at``, what a part does now).
 
     python benchmarks/store_layout.py [--tiles 2000] [--attrs 14]
 """
@@ -44,11 +44,10 @@ def main(argv=None):
     from zarr.core.group import GroupMetadata
     from zarr.storage import LocalStore
 
-    from tiledsimplify.tiles import TileStore
-    from tiledsimplify.tiles.store import _array_at
+    from tiledsimplify.tiles.layout import array_at, array_templates
 
     spec = {f"dim{i}": (np.dtype("uint16"), ()) for i in range(args.attrs)}
-    templates = TileStore._array_templates(spec, 1_000_000, 4_000_000)
+    templates = array_templates(spec, 1_000_000, 4_000_000)
     keys = list(templates)
     group = GroupMetadata()
     nodes = {"tiles": group}
@@ -81,7 +80,7 @@ def main(argv=None):
               lambda: [root[f"tiles/{t}/{key}"] for t in range(args.tiles) for key in keys])
         meta = {key: root[f"tiles/0/{key}"].metadata for key in keys}
         timed("a part gets every tile's arrays", "made from tile 0's metadata",
-              lambda: [_array_at(store, f"tiles/{t}/{key}", meta[key])
+              lambda: [array_at(store, f"tiles/{t}/{key}", meta[key])
                        for t in range(args.tiles) for key in keys])
     print(f"\n{args.tiles:,} tiles, {len(nodes):,} nodes ({len(keys)} arrays a tile)\n")
     print("| step | how | wall s | CPU s |")

@@ -174,9 +174,9 @@ def test_plan_does_not_cut_through_a_flat_face():
 def test_ingest_buffers_do_not_keep_input_chunks_alive():
     # a buffered remainder must not be a view of the whole input chunk: with many tiles
     # holding remainders, ingest memory grew with the number of chunks (measured at 10M)
-    from tiledsimplify.tiles.store import _TileBuffer
+    from tiledsimplify.tiles.ingest import TileBuffer
     chunk = np.arange(3000.0).reshape(1000, 3)
-    buf = _TileBuffer(lambda: {"xyz": object()}, chunk_rows=64, keys=["xyz"])
+    buf = TileBuffer(lambda: {"xyz": object()}, chunk_rows=64, keys=["xyz"])
     buf.add({"xyz": chunk[10:110]})
     assert not np.shares_memory(buf.pieces["xyz"][0], chunk)
     n, jobs = buf.flush(aligned=True)
@@ -268,7 +268,7 @@ def test_an_input_that_fits_the_buffer_is_read_once(tmp_path):
     # the ingest's second pass is handed the first pass's chunks when they hold at most
     # buffer_points points together (no second read and decompression); a larger input is
     # read again; the store is the same either way
-    from tiledsimplify.tiles.store import _ReadOnce
+    from tiledsimplify.tiles.ingest import ReadOnce
     xyz = clustered(25_000, seed=5)
     attrs = {"i": np.arange(25_000, dtype=np.int32)}
     reads = []
@@ -293,7 +293,7 @@ def test_an_input_that_fits_the_buffer_is_read_once(tmp_path):
             np.testing.assert_array_equal(a, b)
         np.testing.assert_array_equal(once.attrs(t)["i"], twice.attrs(t)["i"])
     # a first pass that did not end keeps nothing; the kept chunks are handed out once
-    source = _ReadOnce(make_chunks(xyz, size=7_000), 10 ** 6)
+    source = ReadOnce(make_chunks(xyz, size=7_000), 10 ** 6)
     first = source()
     next(first)
     first.close()
@@ -346,7 +346,7 @@ def test_ingest_writes_run_a_batch_behind_and_never_two_at_once_on_an_array():
     import threading
     from concurrent.futures import ThreadPoolExecutor
 
-    from tiledsimplify.tiles.store import _Writes
+    from tiledsimplify.tiles.ingest import Writes
     log, lock = [], threading.Lock()
 
     class Slow:
@@ -371,7 +371,7 @@ def test_ingest_writes_run_a_batch_behind_and_never_two_at_once_on_an_array():
             super().__setitem__(key, data)
 
     with ThreadPoolExecutor(4) as pool:
-        writes = _Writes(pool)
+        writes = Writes(pool)
         first = threading.Thread(target=writes.submit, args=([(Held("h"), 0, 10, None)],))
         first.start()
         first.join(10)
@@ -385,7 +385,7 @@ def test_ingest_writes_run_a_batch_behind_and_never_two_at_once_on_an_array():
     assert log.index(("end", "a", 0)) < log.index(("start", "a", 10))
     assert ("end", "a", 10) in log
     with ThreadPoolExecutor(2) as pool, pytest.raises(OSError, match="c: disk full"):
-        writes = _Writes(pool)
+        writes = Writes(pool)
         writes.submit([(Slow("c", fail=True), 0, 10, None)])
         writes.drain()
 
@@ -396,7 +396,7 @@ def test_chunks_are_read_one_ahead_in_order_with_errors_and_early_stops():
     # that stops early stops the reader and closes the source
     import threading
 
-    from tiledsimplify.tiles.store import _read_ahead
+    from tiledsimplify.tiles.ingest import read_ahead
     state = {"read": 0, "done": 0, "closed": False}
     lock = threading.Lock()
 
@@ -413,7 +413,7 @@ def test_chunks_are_read_one_ahead_in_order_with_errors_and_early_stops():
             state["closed"] = True
 
     got = []
-    for item in _read_ahead(source(20)):
+    for item in read_ahead(source(20)):
         time.sleep(0.005)  # the reader gets ahead if it may
         got.append(item)
         with lock:
@@ -421,10 +421,10 @@ def test_chunks_are_read_one_ahead_in_order_with_errors_and_early_stops():
     assert got == list(range(20)) and state["closed"]
     state.update(read=0, done=0, closed=False)
     with pytest.raises(OSError, match="chunk 3: truncated file"):
-        for _ in _read_ahead(source(10, fail_at=3)):
+        for _ in read_ahead(source(10, fail_at=3)):
             state["done"] += 1
     state.update(read=0, done=0, closed=False)
-    gen = _read_ahead(source(10))
+    gen = read_ahead(source(10))
     assert next(gen) == 0
     gen.close()
     assert state["closed"] and state["read"] <= 2
@@ -502,28 +502,28 @@ def test_ingest_in_parts_holds_what_one_ingest_holds(tmp_path, n_total):
 
 
 def test_a_part_samples_below_a_key_the_whole_sample_lies_under():
-    from tiledsimplify.tiles.store import _key_limit, _sample_keys
+    from tiledsimplify.tiles.sampling import key_limit, sample_keys
     for n, k, seed in [(10_000, 500, 0), (1_000_000, 200_000, 3), (123_457, 1, 9)]:
-        limit = _key_limit(k, n)
+        limit = key_limit(k, n)
         assert limit is not None
-        keys = np.sort(_sample_keys(np.arange(n), seed))
+        keys = np.sort(sample_keys(np.arange(n), seed))
         assert keys[k - 1] < np.uint64(limit)          # the k smallest lie below it
         assert (keys < np.uint64(limit)).sum() < 2 * k + 200  # and it keeps few more
-    assert _key_limit(1000, 1000) is None and _key_limit(10, None) is None
+    assert key_limit(1000, 1000) is None and key_limit(10, None) is None
 
 
 def test_the_sample_is_the_k_smallest_keys_however_the_input_is_chunked():
     # bottom-k by a hash of the global index: every chunking (and a part's key limit) gives
     # the sample that sorting all the keys gives
-    from tiledsimplify.tiles.store import _BottomK, _key_limit, _sample_keys
+    from tiledsimplify.tiles.sampling import BottomK, key_limit, sample_keys
     rng = np.random.default_rng(5)
     n = 40_000
     xyz = rng.random((n, 3))
     for k, seed in [(1_000, 0), (39_999, 2), (50_000, 1), (1, 7)]:
-        want = np.sort(np.argsort(_sample_keys(np.arange(n), seed), kind="stable")[:k])
+        want = np.sort(np.argsort(sample_keys(np.arange(n), seed), kind="stable")[:k])
         for cuts in ([n], [1, 2, n], sorted(rng.choice(n, 9, replace=False).tolist()) + [n]):
-            for limit in (None, _key_limit(k, n)):
-                sampler = _BottomK(k, seed, limit)
+            for limit in (None, key_limit(k, n)):
+                sampler = BottomK(k, seed, limit)
                 start = 0
                 for end in cuts:
                     sampler.add(start, xyz[start:end])
@@ -617,7 +617,7 @@ def test_a_format_2_store_reads_its_attributes_an_array_each(sp_data, tmp_path):
 
     import zarr
 
-    from tiledsimplify.tiles.store import attribute_layout, unpack_attribute
+    from tiledsimplify.tiles.layout import attribute_layout, unpack_attribute
     xyz, attrs = sp_data
     path = tmp_path / "old"
     small = {k: v[:20_000] for k, v in attrs.items()}
@@ -824,20 +824,21 @@ def test_results_write_read_and_resume(tmp_path, monkeypatch):
 
 def test_arrays_made_from_known_metadata_write_what_zarr_reads(tmp_path):
     """A part of the input makes each tile's arrays from tile 0's metadata, without reading
-    their zarr.json (``_array_at``): what it writes there, zarr reads back — the attributes
+    their zarr.json (``array_at``): what it writes there, zarr reads back — the attributes
     packed in rows of bytes and unpacked again."""
     import zarr
     from zarr.core.group import GroupMetadata
     from zarr.storage import LocalStore
 
-    from tiledsimplify.tiles.store import (
-        _array_at,
+    from tiledsimplify.tiles.layout import (
+        array_at,
+        array_templates,
         attribute_layout,
         pack_attributes,
         unpack_attribute,
     )
     spec = {"intensity": (np.dtype("uint16"), ()), "rgb": (np.dtype("uint16"), (3,))}
-    templates = TileStore._array_templates(spec, 1000, 5000)
+    templates = array_templates(spec, 1000, 5000)
     assert sorted(templates) == ["attributes", "index", "xyz"]
     nodes = {"tiles": GroupMetadata()}
     for t in range(3):
@@ -853,7 +854,7 @@ def test_arrays_made_from_known_metadata_write_what_zarr_reads(tmp_path):
     rgb = np.arange(15, dtype=np.uint16).reshape(5, 3)
     intensity = np.array([1, 2, 65535, 0, 7], dtype=np.uint16)
     rows = pack_attributes({"rgb": rgb, "intensity": intensity}, layout, width, 5)
-    _array_at(store, "tiles/2/attributes", meta)[1000:1005] = rows
+    array_at(store, "tiles/2/attributes", meta)[1000:1005] = rows
     back = zarr.open_group(store, mode="r")["tiles/2/attributes"]
     assert back.shape == (5000, 8) and back.dtype == np.uint8
     np.testing.assert_array_equal(unpack_attribute(back[1000:1005], layout["rgb"]), rgb)
@@ -863,7 +864,7 @@ def test_arrays_made_from_known_metadata_write_what_zarr_reads(tmp_path):
 
 
 def test_packed_attributes_come_back_as_they_went_in():
-    from tiledsimplify.tiles.store import (
+    from tiledsimplify.tiles.layout import (
         attribute_layout,
         pack_attributes,
         unpack_attribute,

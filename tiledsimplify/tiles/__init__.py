@@ -14,8 +14,8 @@ from .store import (
     StoreError,
     StoreExistsError,
     TileStore,
-    estimate_spacing,
 )
+from .sampling import estimate_spacing
 
 __all__ = [
     "ChunkSource",

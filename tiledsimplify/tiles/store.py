@@ -7,8 +7,9 @@ Layout of the store directory (a zarr v3 group)::
     tiles/<id>/index               int64 (r,)      their global index in the input
     tiles/<id>/attributes          uint8 (r, B)    every per-point attribute of the input, each
                                                    point's values packed in one row of bytes
-                                                   (:func:`attribute_layout`; format 3; formats
-                                                   1-2: tiles/<id>/attrs/<name>, an array each)
+                                                   (format 3, :func:`layout.attribute_layout`;
+                                                   formats 1-2: tiles/<id>/attrs/<name>, an
+                                                   array each)
     tiles/<id>/result/<name>       (k, ...)        written by :meth:`TileStore.write_result`;
                                                    the result group's attribute ``done`` is
                                                    set true only after all its arrays are written
@@ -50,24 +51,21 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import os
-import re
 from collections.abc import Callable, Iterable, Mapping
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import zarr
-from scipy.spatial import cKDTree
-from zarr.codecs import BloscCodec
-from zarr.core.array import AsyncArray
 from zarr.core.group import GroupMetadata
-from zarr.storage import LocalStore, MemoryStore, StorePath
 
-from ..core.bounds import box
 from ..errors import InputError, TiledSimplifyError
+from .ingest import ReadOnce, fill_part, lay_out_tiles, map_here, merge_specs, scan_part
+from .layout import (NAME_RE, array_templates, attribute_layout, codec, tile_nodes,
+                     unpack_attribute)
 from .local_store import InlineStore
 from .partition import TilePlan, plan_tiles
+from .sampling import BottomK, estimate_spacing, key_limit
 
 __all__ = [
     "ChunkSource",
@@ -76,7 +74,6 @@ __all__ = [
     "StoreError",
     "StoreExistsError",
     "TileStore",
-    "estimate_spacing",
 ]
 
 ChunkSource = Callable[[], Iterable[tuple[int, np.ndarray, Mapping[str, np.ndarray]]]]
@@ -85,12 +82,10 @@ FORMAT = "tiledsimplify.tilestore"
 FORMAT_VERSION = 3
 #: store versions this code reads (2: each part of the ingest writes its own region of a
 #: tile's arrays, ``part_starts`` / ``part_counts``; in 1 the arrays held the rows alone; 3:
-#: a tile's attributes packed in one array, :func:`attribute_layout`)
+#: a tile's attributes packed in one array, :func:`layout.attribute_layout`)
 READS_VERSIONS = (1, 2, 3)
 DEFAULT_CHUNK_ROWS = 65_536
 HALO_SPACINGS = 10.0
-_WRITE_THREADS = 4  # concurrent array writes during ingest (zarr/blosc release the GIL)
-_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
 
 
 class StoreError(TiledSimplifyError, OSError):
@@ -107,63 +102,6 @@ class StoreExistsError(StoreError, FileExistsError):
 
 class ResultExistsError(TiledSimplifyError, FileExistsError):
     """A tile already has a finished result and overwriting was not asked for."""
-
-
-def _codec() -> BloscCodec:
-    # lz4 with byte shuffle: ~3x faster to write than the default zstd for float64 at about
-    # the same size; shuffle groups the slowly varying high bytes of coordinates.
-    return BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")
-
-
-def attribute_layout(spec) -> tuple[dict[str, tuple[int, int, np.dtype, tuple]], int]:
-    """Where each attribute of ``spec`` (name -> dtype, trailing shape) lies in a point's
-    packed row of bytes (format 3): ``({name: (offset, size, dtype, trail)}, row width)``.
-
-    One array of rows instead of an array per attribute: the 1M LAS scan's twelve attributes
-    were twelve zarr arrays a tile to lay out, write and read (each array ~1.5-2 ms of zarr's
-    own work), and twelve gathers a chunk in the ingest."""
-    out, off = {}, 0
-    for name, (dtype, trail) in spec.items():
-        dt = np.dtype(dtype)
-        size = dt.itemsize * int(np.prod(tuple(trail), dtype=np.int64))
-        out[name] = (off, size, dt, tuple(trail))
-        off += size
-    return out, off
-
-
-def pack_attributes(attrs: Mapping[str, np.ndarray], layout, width: int, m: int) -> np.ndarray:
-    """The rows of bytes (m, width) of ``m`` points' ``attrs`` (:func:`attribute_layout`)."""
-    rec = np.empty((m, width), dtype=np.uint8)
-    if m:
-        for name, (off, size, dt, _) in layout.items():
-            v = np.ascontiguousarray(attrs[name], dtype=dt).reshape(m, -1)
-            rec[:, off:off + size] = v.view(np.uint8)
-    return rec
-
-
-def unpack_attribute(rec: np.ndarray, entry) -> np.ndarray:
-    """One attribute's values (k, ...) from packed rows (:func:`pack_attributes`)."""
-    off, size, dt, trail = entry
-    col = np.ascontiguousarray(rec[:, off:off + size])
-    return col.view(dt).reshape((rec.shape[0],) + trail)
-
-
-# ---------------------------------------------------------------------------- helpers
-def _mix64(x: np.ndarray) -> np.ndarray:
-    """splitmix64 finaliser: a bijective, well-mixed hash of uint64 values (wraps mod 2**64)."""
-    x = x.astype(np.uint64, copy=True)
-    x += np.uint64(0x9E3779B97F4A7C15)
-    x ^= x >> np.uint64(30)
-    x *= np.uint64(0xBF58476D1CE4E5B9)
-    x ^= x >> np.uint64(27)
-    x *= np.uint64(0x94D049BB133111EB)
-    x ^= x >> np.uint64(31)
-    return x
-
-
-def _sample_keys(index: np.ndarray, seed: int) -> np.ndarray:
-    salt = _mix64(np.array([seed & 0xFFFFFFFFFFFFFFFF], dtype=np.uint64))[0]
-    return _mix64(index.astype(np.uint64) ^ salt)
 
 
 def _jsonable(obj: Any, what: str) -> Any:
@@ -187,453 +125,6 @@ def _jsonable(obj: Any, what: str) -> Any:
             from None
 
 
-def estimate_spacing(sample_xyz: np.ndarray, n_total: int) -> tuple[float, float]:
-    """Estimate the typical point spacing of the whole cloud from a uniform sample.
-
-    The median distance from each sample point to its nearest other sample point, ``d_s``, is
-    measured with a kd-tree. A sample of ``s`` of the ``n`` points is ``n / s`` times sparser
-    than the cloud; for a *surface-like* cloud (a scan: points on 2-D surfaces) spacing scales
-    as ``density ** -1/2``, so the cloud's spacing is estimated as ``d_s * sqrt(s / n)``. (For a
-    volume-filling cloud the true factor is ``(s / n) ** (1/3)`` and this underestimates; for
-    curve-like data it overestimates.) Zero distances (duplicate points) are ignored when the
-    median would otherwise be zero.
-
-    Parameters
-    ----------
-    sample_xyz : ndarray, shape (s, 3)
-        Uniform random sample of the cloud.
-    n_total : int
-        Number of points of the cloud.
-
-    Returns
-    -------
-    spacing : float
-        Estimated median nearest-neighbour spacing of the whole cloud (0 if it cannot be
-        estimated: fewer than 2 distinct points).
-    sample_median : float
-        The measured median nearest-neighbour distance within the sample, ``d_s``.
-    """
-    s = sample_xyz.shape[0]
-    if s < 2:
-        return 0.0, 0.0
-    d, _ = cKDTree(sample_xyz).query(sample_xyz, k=2, workers=-1)
-    d = d[:, 1]
-    med = float(np.median(d))
-    if med == 0.0:
-        pos = d[d > 0]
-        med = float(np.median(pos)) if pos.size else 0.0
-    return med * float(np.sqrt(min(1.0, s / max(int(n_total), 1)))), med
-
-
-class _ChunkChecker:
-    """Validates chunks and remembers the attribute schema from the first one."""
-
-    def __init__(self):
-        self.spec: dict[str, tuple[np.dtype, tuple[int, ...]]] | None = None
-
-    def __call__(self, item) -> tuple[int, np.ndarray, dict[str, np.ndarray]]:
-        try:
-            start, xyz, attrs = item
-        except (TypeError, ValueError):
-            raise InputError("each chunk must be a tuple (start_index, xyz, attrs)") from None
-        if isinstance(start, (bool, np.bool_)) or not isinstance(start, (int, np.integer)) \
-                or start < 0:
-            raise InputError(f"a chunk's start_index must be a non-negative integer, got "
-                             f"{start!r}")
-        xyz = np.asarray(xyz)
-        if xyz.ndim != 2 or xyz.shape[1] != 3:
-            raise InputError(f"a chunk's xyz must have shape (m, 3), got {xyz.shape} "
-                             f"(chunk starting at {start})")
-        if xyz.dtype != np.float64:
-            if not np.can_cast(xyz.dtype, np.float64, casting="safe"):
-                raise InputError(f"a chunk's xyz must be float64, got {xyz.dtype}")
-            xyz = xyz.astype(np.float64)
-        if not np.isfinite(xyz).all():
-            row = start + int(np.flatnonzero(~np.isfinite(xyz).all(axis=1))[0])
-            raise InputError(f"point {row} (in the chunk starting at {start}) has a NaN or "
-                             "infinite coordinate; drop those points before tiling")
-        m = xyz.shape[0]
-        if attrs is None:
-            attrs = {}
-        if not isinstance(attrs, Mapping):
-            raise InputError(f"a chunk's attrs must be a mapping name -> array, got "
-                             f"{type(attrs).__name__}")
-        out = {}
-        for name, arr in attrs.items():
-            arr = np.asarray(arr)
-            if arr.ndim < 1 or arr.shape[0] != m:
-                raise InputError(f"attribute {name!r} has shape {arr.shape} but the chunk "
-                                 f"starting at {start} has {m} points")
-            out[str(name)] = arr
-        if self.spec is None:
-            spec = {}
-            for name, arr in out.items():
-                if not _NAME_RE.match(name):
-                    raise InputError(f"attribute name {name!r} is not usable as a store key "
-                                     "(use letters, digits, '_', '-', '.'; no '/')")
-                if arr.dtype.kind not in "biuf":
-                    raise InputError(f"attribute {name!r} has dtype {arr.dtype}; only bool, "
-                                     "integer and float attributes can be stored")
-                spec[name] = (arr.dtype, arr.shape[1:])
-            self.spec = spec
-        if set(out) != set(self.spec):
-            raise InputError(f"the chunk starting at {start} has attributes {sorted(out)}, "
-                             f"the first chunk had {sorted(self.spec)}")
-        for name, (dtype, trail) in self.spec.items():
-            arr = out[name]
-            if arr.shape[1:] != trail:
-                raise InputError(f"attribute {name!r} has per-point shape {arr.shape[1:]} in "
-                                 f"the chunk starting at {start}, {trail} in the first chunk")
-            if arr.dtype != dtype:
-                if not np.can_cast(arr.dtype, dtype, casting="safe"):
-                    raise InputError(f"attribute {name!r} is {arr.dtype} in the chunk starting "
-                                     f"at {start} but {dtype} in the first chunk")
-                out[name] = arr.astype(dtype)
-        return int(start), xyz, out
-
-
-class _BottomK:
-    """Uniform sample without replacement of bounded size: keep the k smallest hash keys.
-
-    Each point's key is a seeded hash of its global index, so the sample depends only on the
-    set of points and the seed, not on chunk sizes or chunk order. A sample of one part of
-    the input may keep only keys below ``limit`` (:func:`_key_limit`): the k smallest keys of
-    the whole input lie below it (checked when the parts' samples are merged).
-    """
-
-    def __init__(self, k: int, seed: int, limit: int | None = None):
-        self.k, self.seed = k, seed
-        self.limit = None if limit is None else np.uint64(limit)
-        self.keys = np.zeros(0, dtype=np.uint64)
-        self.xyz = np.zeros((0, 3))
-        self.index = np.zeros(0, dtype=np.int64)
-
-    def add(self, start: int, xyz: np.ndarray):
-        """Add a chunk's points (global indices from ``start``). Only its own ``k`` smallest
-        keys below the bounds can enter the sample, so they are picked from the keys before
-        any coordinate is gathered: a chunk of 1M points copied 40 MB of them into the merge
-        before, its first ``add`` in a fresh process 0.26 s against 0.03 s for the same chunk
-        again (new memory is slow to touch on these machines: docs/measurements.md, "Memory
-        new to a process")."""
-        keys = _sample_keys(np.arange(start, start + xyz.shape[0], dtype=np.int64), self.seed)
-        below = self.limit
-        if self.keys.size >= self.k:
-            top = self.keys.max()
-            below = top if below is None else min(below, top)
-        sel = np.arange(keys.size) if below is None else np.flatnonzero(keys < below)
-        if sel.size > self.k:
-            sel = sel[np.argpartition(keys[sel], self.k - 1)[: self.k]]
-        self.merge(keys[sel], start + sel, xyz[sel])
-
-    def merge(self, keys: np.ndarray, idx: np.ndarray, xyz: np.ndarray):
-        """Add points with their keys (another sample's ``keys``, ``index``, ``xyz``)."""
-        if self.limit is not None:
-            keep = keys < self.limit
-            keys, idx, xyz = keys[keep], idx[keep], xyz[keep]
-        if self.keys.size >= self.k:
-            keep = keys < self.keys.max()
-            keys, idx, xyz = keys[keep], idx[keep], xyz[keep]
-        if not keys.size:
-            return
-        keys = np.concatenate([self.keys, keys])
-        idx = np.concatenate([self.index, idx])
-        xyz = np.concatenate([self.xyz, xyz])
-        if keys.size > self.k:
-            sel = np.argpartition(keys, self.k - 1)[: self.k]
-            keys, idx, xyz = keys[sel], idx[sel], xyz[sel]
-        self.keys, self.index, self.xyz = keys, idx, xyz
-
-    def result(self) -> np.ndarray:
-        order = np.argsort(self.index, kind="stable")
-        return self.xyz[order]
-
-
-def _key_limit(k: int, n: int | None) -> int | None:
-    """A key below which the ``k`` smallest of ``n`` uniform 64-bit keys lie but for a chance
-    of ~1e-15 (8 standard deviations and 64 keys of margin); None when that is no limit."""
-    if n is None or n <= 0:
-        return None
-    want = k + 8.0 * np.sqrt(k) + 64.0
-    if want >= n:
-        return None
-    return int(want / n * 2.0 ** 64)
-
-
-class _TileBuffer:
-    """Per-tile pending rows, flushed to the zarr arrays in whole chunks where possible.
-
-    Rows go to the arrays from row ``base`` on (a part's region, :func:`_fill_part`).
-    ``arrays`` is a dict key -> zarr.Array, or a callable returning one at the first flush (a
-    part opens only the tiles it has points in)."""
-
-    def __init__(self, arrays, chunk_rows: int, keys: Iterable[str], base: int = 0):
-        self._arrays = arrays
-        self.rows = chunk_rows
-        self.base = int(base)
-        self.pieces: dict[str, list[np.ndarray]] = {k: [] for k in keys}
-        self.pending = 0
-        self.written = 0
-
-    @property
-    def arrays(self) -> dict[str, Any]:
-        if callable(self._arrays):
-            self._arrays = self._arrays()
-        return self._arrays
-
-    def add(self, parts: dict[str, np.ndarray]):
-        # copies, not views: a view of a few rows would keep the whole input chunk alive, and
-        # with many tiles holding remainders, memory would grow with the number of chunks
-        for k, v in parts.items():
-            self.pieces[k].append(np.array(v, copy=True))
-        self.pending += next(iter(parts.values())).shape[0]
-
-    def flush(self, aligned: bool) -> tuple[int, list]:
-        """Take pending rows out of the buffer as write jobs.
-
-        With ``aligned``, only rows up to the last whole-chunk boundary are taken, so that
-        every write but a tile's last one covers whole zarr chunks (no read-modify-write).
-
-        Returns
-        -------
-        n : int
-            Rows taken.
-        jobs : list of (zarr.Array, start, end, data)
-            Writes to run (concurrently, each array's in order) with :class:`_Writes`.
-        """
-        if not self.pending:
-            return 0, []
-        end = self.written + self.pending
-        if aligned:
-            end = (end // self.rows) * self.rows
-        n = end - self.written
-        if n <= 0:
-            return 0, []
-        jobs = []
-        for k, arr in self.arrays.items():
-            data = np.concatenate(self.pieces[k]) if len(self.pieces[k]) > 1 \
-                else self.pieces[k][0]
-            jobs.append((arr, self.base + self.written, self.base + end, data[:n]))
-            self.pieces[k] = [data[n:].copy()] if n < data.shape[0] else []
-        self.written = end
-        self.pending -= n
-        return n, jobs
-
-
-def _write_job(job) -> None:
-    arr, start, end, data = job
-    arr[start:end] = data
-
-
-class _Writes:
-    """Write jobs run in ``pool`` one batch behind the caller: :meth:`submit` returns once the
-    batch before this one has been written, so the next chunk is read and sorted while this
-    one's rows are compressed and written (the 10M scan's ingest waited 3.9 s of its 7.8 s
-    second pass for its writes, 2026-12-05). A job starts only after the previous job on the
-    same array (a partial chunk's write and the next write to that array may touch one zarr
-    chunk). :meth:`drain` waits for the rest; an error of a job is raised by the call that
-    waits for it."""
-
-    def __init__(self, pool: ThreadPoolExecutor):
-        self.pool = pool
-        self.last: dict[int, Any] = {}  # id(array) -> the future of its latest job
-        self.batch: list = []  # the futures of the last batch, not waited for yet
-
-    def submit(self, jobs: list) -> None:
-        batch = []
-        for job in jobs:
-            before = self.last.get(id(job[0]))
-            if before is not None:
-                before.result()  # that array's previous write first
-            self.last[id(job[0])] = future = self.pool.submit(_write_job, job)
-            batch.append(future)
-        older, self.batch = self.batch, batch
-        for f in older:
-            f.result()
-
-    def drain(self) -> None:
-        batch, self.batch, self.last = self.batch, [], {}
-        for f in batch:
-            f.result()
-
-
-def _map_here(progress):
-    """The default ``map_parts`` of :meth:`TileStore.create`: the parts one after another in
-    this process, reporting ``progress(pass, points read so far in the pass)`` per chunk."""
-
-    def run(func, args, pass_number):
-        done = 0
-        if progress is not None:
-            progress(pass_number, 0)
-        out = []
-        for a in args:
-            base = done
-            step = None if progress is None else (
-                lambda read, base=base: progress(pass_number, base + read))
-            result = func(*a, progress=step)
-            done += result["points"]
-            out.append(result)
-        return out
-
-    return run
-
-
-def _read_ahead(chunks: Iterable):
-    """``chunks``' items, the next one read in a thread while the caller works on this one:
-    the 10M-point LAZ scan's ingest 8.2-8.9 s against 8.7-9.4 (5 alternating pairs,
-    2026-12-05; decompression and the LAS fields' copies beside the sorting and writing). At
-    most two chunks in memory: the one handed out and the one being read. An error of the
-    reader is raised where its item would have come; a caller that stops early stops the
-    reader, which closes ``chunks``."""
-    import queue
-    import threading
-    items: queue.Queue = queue.Queue()
-    slot = threading.Semaphore(1)  # a chunk may be read: the one before was handed out
-    stop = threading.Event()
-    end = object()
-
-    def read():
-        it = iter(chunks)
-        try:
-            while True:
-                while not slot.acquire(timeout=0.1):
-                    if stop.is_set():
-                        return
-                if stop.is_set():
-                    return
-                item = next(it, end)
-                items.put((item, None))
-                if item is end:
-                    return
-        except BaseException as exc:  # noqa: BLE001 - handed to the caller
-            items.put((end, exc))
-        finally:
-            close = getattr(it, "close", None)
-            if close is not None:
-                close()
-
-    thread = threading.Thread(target=read, name="tiledsimplify-read-ahead", daemon=True)
-    thread.start()
-    try:
-        while True:
-            item, exc = items.get()
-            slot.release()
-            if item is end:
-                if exc is not None:
-                    raise exc
-                return
-            yield item
-    finally:
-        stop.set()
-        slot.release()
-        thread.join()
-
-
-class _ReadOnce:
-    """A chunk source that a small input is read from once: its first full pass keeps the
-    chunks if they hold at most ``max_points`` points together, and the next pass (the
-    ingest's second) is handed those instead of reading and decoding the input again; a
-    larger input is read again. The kept chunks are released once handed out.
-
-    The 1M-point LAZ scan of ``benchmarks/pipeline_speed.py`` is one chunk, whose reading and
-    decompression took ~0.2 s of each pass. Only for an ingest in this process: parts read
-    elsewhere (processes, a cluster) are read as before."""
-
-    def __init__(self, source, max_points: int):
-        self._source = source
-        self._max = int(max_points)
-        self._kept = None
-
-    def __call__(self):
-        if self._kept is not None:
-            kept, self._kept = self._kept, None
-            return iter(kept)
-        return self._first()
-
-    def _first(self):
-        kept, total = [], 0
-        for item in self._source():
-            if kept is not None:
-                try:
-                    total += len(item[1])
-                except TypeError:  # not a chunk: the ingest's checks name the problem
-                    total = self._max + 1
-                if total <= self._max:
-                    kept.append(item)
-                else:
-                    kept = None
-            yield item
-        self._kept = kept  # only once every chunk was read
-
-
-def _scan_part(part, sample_size: int, seed: int, limit: int | None, progress=None) -> dict:
-    """Pass 1 of the ingest over one part of the input: its chunks' ``(start, size)``, its
-    bounds, its sample (the part's smallest keys, below ``limit`` if given: :class:`_BottomK`)
-    and the attribute schema of its first chunk. Runs where ``map_parts`` puts it."""
-    check = _ChunkChecker()
-    sampler = _BottomK(sample_size, seed, limit)
-    intervals: list[tuple[int, int]] = []
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
-    read = 0
-    for item in _read_ahead(part()):
-        start, xyz, _ = check(item)
-        m = xyz.shape[0]
-        intervals.append((start, m))
-        read += m
-        if progress is not None:
-            progress(read)
-        if not m:
-            continue
-        c_lo, c_hi = box(xyz)
-        lo = np.minimum(lo, c_lo)
-        hi = np.maximum(hi, c_hi)
-        sampler.add(start, xyz)
-    return {"points": read, "intervals": intervals, "lo": lo, "hi": hi, "keys": sampler.keys,
-            "index": sampler.index, "xyz": sampler.xyz, "spec": check.spec}
-
-
-def _merge_specs(specs):
-    """The attribute schema of the whole input from its parts' (None: a part without chunks):
-    the first part's, which every other part's must match as a later chunk must match the
-    first (:class:`_ChunkChecker`)."""
-    known = [sp for sp in specs if sp is not None]
-    if not known:
-        return None
-    first = known[0]
-    for sp in known[1:]:
-        if set(sp) != set(first):
-            raise InputError(f"parts of the input have attributes {sorted(sp)} and "
-                             f"{sorted(first)}; every chunk must have the same ones")
-        for name, (dtype, trail) in first.items():
-            d, tr = sp[name]
-            if tr != trail or not np.can_cast(d, dtype, casting="safe"):
-                raise InputError(f"attribute {name!r} is {d}{list(tr)} in one part of the "
-                                 f"input but {dtype}{list(trail)} in the first")
-    return first
-
-
-def _tile_nodes(tiles, templates) -> dict[str, Any]:
-    """The zarr nodes of ``tiles``: each one's group and its arrays
-    (``templates``, :meth:`TileStore._array_templates`)."""
-    group = GroupMetadata()
-    nodes: dict[str, Any] = {}
-    for t in tiles:
-        nodes[f"tiles/{t}"] = group
-        for key, meta in templates.items():
-            nodes[f"tiles/{t}/{key}"] = meta
-    return nodes
-
-
-def _lay_out_tiles(path: str, tiles, spec, chunk_rows: int, rows: int, progress=None) -> dict:
-    """A ``map_parts`` task of :meth:`TileStore.create` (its "pass" 0): lay out the nodes of
-    ``tiles`` (:func:`_tile_nodes`, arrays of ``rows`` rows in chunks of ``chunk_rows``) in
-    the store at ``path``, at once (zarr's concurrent metadata writes), where the parts of
-    the input run. Returns ``{"points": 0}``."""
-    nodes = _tile_nodes(tiles, TileStore._array_templates(spec, chunk_rows, rows))
-    dict(zarr.create_hierarchy(store=InlineStore(path), nodes=nodes))
-    return {"points": 0}
-
-
 def _in_box(xyz: np.ndarray, lo, hi) -> np.ndarray:
     """Rows of ``xyz`` with ``lo <= p <= hi`` on every axis, ascending: an axis at a time,
     each on the rows the ones before kept (a neighbouring tile's core mostly fails the first:
@@ -646,104 +137,6 @@ def _in_box(xyz: np.ndarray, lo, hi) -> np.ndarray:
         if not rows.size:
             break
     return rows
-
-
-def _array_at(store: LocalStore, name: str, metadata) -> zarr.Array:
-    """The array ``name`` of ``store`` whose metadata is known (as laid out): no read. A part
-    of the input that writes to every tile (a scan-ordered file) opened each tile's arrays
-    from their ``zarr.json`` before: 0.6 ms an array, 20 s a part for 2,000 tiles of LAS
-    input on this machine against 0.8 s so (``benchmarks/store_layout.py``)."""
-    return zarr.Array(AsyncArray(metadata=metadata, store_path=StorePath(store, name)))
-
-
-def _fill_part(path: str, part, base: int, intervals, spec, buffer_points: int,
-               arrays=None, progress=None) -> dict:
-    """Pass 2 of the ingest over one part: assign each point to its tile and append it, in
-    input order, to the tile's arrays from row ``base`` on — the part's own region of every
-    tile's arrays, whole chunks that no other part writes, so parts may run at once in any
-    processes. ``arrays``: the tiles' arrays by ``(tile, key)`` if the caller made them in
-    this process; else made at a tile's first write from tile 0's metadata (every tile's
-    array of a key has the same), read once per key. Returns the points read and the rows
-    written per tile."""
-    store = InlineStore(path)
-    root = zarr.open_group(store, mode="r+")
-    plan = TilePlan.from_dict(root.attrs["plan"])
-    chunk_rows = int(root.attrs["chunk_rows"])
-    keys = ["xyz", "index"] + (["attributes"] if spec else [])
-    layout, width = attribute_layout(spec)
-
-    metadata = {}
-
-    def tile_arrays(t):
-        if arrays is not None:
-            return {key: arrays[(t, key)] for key in keys}
-        if not metadata:
-            metadata.update((key, root[f"tiles/0/{key}"].metadata) for key in keys)
-        return {key: _array_at(store, f"tiles/{t}/{key}", metadata[key]) for key in keys}
-
-    buffers = [_TileBuffer(lambda t=t: tile_arrays(t), chunk_rows, keys, base)
-               for t in range(plan.n_tiles)]
-    pending_total = 0
-    check = _ChunkChecker()
-    check.spec = spec
-    j = 0
-    read = 0
-    with ThreadPoolExecutor(max_workers=_WRITE_THREADS) as pool:
-        writes = _Writes(pool)
-        for item in _read_ahead(part()):
-            start, xyz, a = check(item)
-            m = xyz.shape[0]
-            if j >= len(intervals) or tuple(intervals[j]) != (start, m):
-                raise InputError(
-                    "the chunk source gave different chunks on the second pass (chunk "
-                    f"{j}: expected (start, size) "
-                    f"{tuple(intervals[j]) if j < len(intervals) else None}, got "
-                    f"{(start, m)}); it must be re-iterable and deterministic")
-            j += 1
-            read += m
-            if not m:
-                continue
-            tile = plan.assign(xyz)
-            order = np.argsort(tile, kind="stable")
-            counts = np.bincount(tile, minlength=plan.n_tiles)
-            edges = np.concatenate([[0], np.cumsum(counts)])
-            index = np.arange(start, start + m, dtype=np.int64)[order]
-            # take: 2-3x faster than indexing rows with ``order`` (NumPy 2.4, 2026-12-05)
-            xyz_s = xyz.take(order, axis=0)
-            attrs_s = ({"attributes": pack_attributes(a, layout, width, m).take(order, axis=0)}
-                       if spec else {})
-            jobs = []
-            for t in np.flatnonzero(counts):
-                s, e = edges[t], edges[t + 1]
-                parts = {"xyz": xyz_s[s:e], "index": index[s:e]}
-                for key, v in attrs_s.items():
-                    parts[key] = v[s:e]
-                buf = buffers[t]
-                buf.add(parts)
-                pending_total += e - s
-                if buf.pending >= chunk_rows:
-                    taken, new = buf.flush(aligned=True)
-                    pending_total -= taken
-                    jobs += new
-            if pending_total > buffer_points:
-                # Over budget: empty the fullest buffers (partial chunks) to half budget.
-                for t in np.argsort([-b.pending for b in buffers], kind="stable"):
-                    if pending_total <= buffer_points // 2:
-                        break
-                    taken, new = buffers[t].flush(aligned=False)
-                    pending_total -= taken
-                    jobs += new
-            writes.submit(jobs)
-            del jobs
-            if progress is not None:
-                progress(read)
-        if j != len(intervals):
-            raise InputError(f"the chunk source gave {j} chunks on the second pass but "
-                             f"{len(intervals)} on the first; it must be re-iterable")
-        for b in buffers:  # every tile's last, partial chunk
-            writes.submit(b.flush(aligned=False)[1])
-        writes.drain()
-    return {"points": read, "counts": [b.written for b in buffers]}
 
 
 def _now() -> str:
@@ -795,11 +188,11 @@ class TileStore:
         ``0..n-1`` exactly once, take the bounding box and draw a uniform sample of at most
         ``sample_size`` points (bottom-k of a seeded hash of the global index: a reservoir
         sample independent of how the input is chunked). From the sample it estimates the
-        point spacing (:func:`estimate_spacing`) and plans the tiles (:func:`plan_tiles`).
-        Pass 2 reads the chunks again (an input of at most ``buffer_points`` points read in
-        this process is kept from pass 1 instead, :class:`_ReadOnce`), assigns each point to
-        its tile and appends it to the tile's arrays. ``complete`` is set in the root
-        attributes only at the very end.
+        point spacing (:func:`sampling.estimate_spacing`) and plans the tiles
+        (:func:`plan_tiles`). Pass 2 reads the chunks again (an input of at most
+        ``buffer_points`` points read in this process is kept from pass 1 instead,
+        :class:`ingest.ReadOnce`), assigns each point to its tile and appends it to the tile's
+        arrays. ``complete`` is set in the root attributes only at the very end.
 
         Parameters
         ----------
@@ -906,19 +299,19 @@ class TileStore:
         n_parts = len(parts)
         in_process = map_parts is None
         if in_process:
-            map_parts = _map_here(progress)
-            parts = [_ReadOnce(part, buffer_points) for part in parts]
+            map_parts = map_here(progress)
+            parts = [ReadOnce(part, buffer_points) for part in parts]
 
         # ---- pass 1: count, cover check, bounds, sample (one task per part)
         def scan_parts(limit):
-            scans = map_parts(_scan_part, [(part, sample_size, seed, limit) for part in parts],
+            scans = map_parts(scan_part, [(part, sample_size, seed, limit) for part in parts],
                               1)
-            sampler = _BottomK(sample_size, seed)
+            sampler = BottomK(sample_size, seed)
             for scan in scans:
                 sampler.merge(scan["keys"], scan["index"], scan["xyz"])
             return scans, sampler
 
-        limit = _key_limit(sample_size, n_total) if n_parts > 1 else None
+        limit = key_limit(sample_size, n_total) if n_parts > 1 else None
         scans, sampler = scan_parts(limit)
         intervals = [tuple(iv) for scan in scans for iv in scan["intervals"]]
         n = cls._check_cover(intervals, n_total)
@@ -926,7 +319,7 @@ class TileStore:
             scans, sampler = scan_parts(None)
         lo = np.min([scan["lo"] for scan in scans], axis=0)
         hi = np.max([scan["hi"] for scan in scans], axis=0)
-        spec = _merge_specs([scan["spec"] for scan in scans]) or {}
+        spec = merge_specs([scan["spec"] for scan in scans]) or {}
         sample = sampler.result()
         spacing, sample_median = estimate_spacing(sample, n)
         halo_is_default = halo is None
@@ -980,21 +373,21 @@ class TileStore:
         rows = int(starts[-1])
         dict(zarr.create_hierarchy(store=store, nodes={"tiles": GroupMetadata()}))
         if in_process:
-            templates = cls._array_templates(spec, chunk_rows, rows)
+            templates = array_templates(spec, chunk_rows, rows)
             made = dict(zarr.create_hierarchy(
-                store=store, nodes=_tile_nodes(range(plan.n_tiles), templates)))
+                store=store, nodes=tile_nodes(range(plan.n_tiles), templates)))
             here = {(t, key): made[f"tiles/{t}/{key}"] for t in range(plan.n_tiles)
                     for key in templates}
             del made
         else:  # the tiles' nodes laid out by the parts' mapper too: a zarr.json each,
             # 0.67 ms apiece here, 2,000 tiles' worth 24 s serial in the client
             batches = np.array_split(np.arange(plan.n_tiles), min(plan.n_tiles, 4 * n_parts))
-            map_parts(_lay_out_tiles, [(str(path), batch.tolist(), spec, chunk_rows, rows)
+            map_parts(lay_out_tiles, [(str(path), batch.tolist(), spec, chunk_rows, rows)
                                        for batch in batches], 0)
             here = None
 
         # ---- pass 2: assign and append, one task per part
-        fills = map_parts(_fill_part, [
+        fills = map_parts(fill_part, [
             (str(path), part, int(starts[k]), scans[k]["intervals"], spec, buffer_points, here)
             for k, part in enumerate(parts)], 2)
         counts = np.array([fill["counts"] for fill in fills], dtype=np.int64).reshape(
@@ -1048,25 +441,6 @@ class TileStore:
             raise InputError(f"n_total was given as {n_total} but the chunks hold {n} points")
         return n
 
-    @staticmethod
-    def _array_templates(spec, chunk_rows: int, rows: int = 0) -> dict[str, Any]:
-        """Metadata of the per-tile arrays of ``rows`` rows (none written yet), made once in
-        memory and reused."""
-        mem = zarr.open_group(MemoryStore(), mode="w")
-        out = {}
-
-        def make(key, dtype, trail):
-            arr = mem.create_array(key.replace("/", "_"), shape=(rows,) + tuple(trail),
-                                   dtype=dtype, chunks=(chunk_rows,) + tuple(trail),
-                                   compressors=_codec(), fill_value=0)
-            out[key] = arr.metadata
-
-        make("xyz", np.float64, (3,))
-        make("index", np.int64, ())
-        if spec:
-            make("attributes", np.uint8, (attribute_layout(spec)[1],))
-        return out
-
     # ------------------------------------------------------------------ opening
     @classmethod
     def open(cls, path) -> "TileStore":
@@ -1115,7 +489,7 @@ class TileStore:
     @property
     def spacing(self) -> float:
         """Estimated median nearest-neighbour spacing of the cloud (see
-        :func:`estimate_spacing`)."""
+        :func:`sampling.estimate_spacing`)."""
         return float(self._attrs["spacing"])
 
     @property
@@ -1409,7 +783,7 @@ class TileStore:
         data = {}
         for name, arr in arrays.items():
             name = str(name)
-            if not _NAME_RE.match(name):
+            if not NAME_RE.match(name):
                 raise InputError(f"result name {name!r} is not usable as a store key (use "
                                  "letters, digits, '_', '-', '.')")
             arr = np.asarray(arr)
@@ -1463,7 +837,7 @@ class TileStore:
             arr = np.ascontiguousarray(arr)
             chunk = rows or max(1, (1 << 20) // max(1, arr[:1].nbytes))
             sg.create_array(str(name), data=arr, chunks=(chunk,) + arr.shape[1:],
-                            compressors=_codec())
+                            compressors=codec())
         sg.update_attributes({"attrs": json.loads(json.dumps(dict(attrs or {}))),
                               "names": list(arrays), "done": True, "written_utc": _now()})
 
