@@ -130,3 +130,18 @@ def test_a_short_run_counts_what_kept_it_with_the_sure_flags(fandisk):
     assert int(got[1]) == must
     assert int(got[2]) == res.stats["n_edge_sure"]
     assert int(got[2]) + int(got[3]) == must
+
+
+def test_a_doubled_cloud_keeps_what_the_cloud_keeps(fandisk):
+    """Every point given twice: the copies go first, sure points' copies too, and the cloud
+    keeps what it keeps given once. The sure points' copies were kept with them (a fifth of
+    the count on the doubled Bunny at 10 %), and the greedy removed as many other points."""
+    once = simplify_points(fandisk, ratio=0.1)
+    assert once.stats["n_edge_sure"] > 0.1 * once.count
+    n = len(fandisk)
+    twice = simplify_points(np.vstack([fandisk, fandisk]), count=once.count)
+    assert twice.reached and twice.count == once.count
+    np.testing.assert_array_equal(twice.keep[:n], once.keep)
+    assert not twice.keep[n:].any()
+    np.testing.assert_array_equal(twice.order[:n], np.arange(n, 2 * n))
+    np.testing.assert_array_equal(twice.boundary[n:], once.boundary)

@@ -257,21 +257,23 @@ def test_deterministic():
     np.testing.assert_array_equal(a.order_importance, b.order_importance)
 
 
-def test_duplicates_removed_first_with_zero_importance():
+@pytest.mark.parametrize("mode", ["coverage", "paper"])
+def test_duplicates_removed_first_with_zero_importance(mode):
     X = _surface(800, seed=4)
     Y = np.vstack([X, X[:50], X[:10]])  # 60 exact copies
-    res = simplify_points(Y, count=700)
+    res = simplify_points(Y, count=700, options={"mode": mode})
     assert res.keep.sum() == 700
     assert res.stats["n_duplicates"] == 60
-    # copies of a boundary point are boundary points (kept); the other copies go first
+    # every copy goes first, a boundary point's too (mode "paper" never removes its boundary
+    # points): a copy keeps nothing its original does not
     copies = np.arange(800, 860)
-    free_copies = copies[~res.boundary[copies]]
-    np.testing.assert_array_equal(res.order[: len(free_copies)], free_copies)
-    assert np.all(res.order_importance[: len(free_copies)] == 0)
-    assert res.order_importance[len(free_copies)] > 0
-    # no kept location appears twice, except on boundary points
-    kept_free = Y[res.keep & ~res.boundary]
-    assert len(np.unique(kept_free, axis=0)) == len(kept_free)
+    assert res.boundary[copies].any() == (mode == "paper")
+    np.testing.assert_array_equal(res.order[:60], copies)
+    assert np.all(res.order_importance[:60] == 0)
+    assert res.order_importance[60] > 0
+    # no kept location appears twice
+    kept = Y[res.keep]
+    assert len(np.unique(kept, axis=0)) == len(kept)
     # the copies of a point carry its flags and normal
     np.testing.assert_array_equal(res.normals[800:850], res.normals[:50])
     np.testing.assert_array_equal(res.boundary[800:850], res.boundary[:50])

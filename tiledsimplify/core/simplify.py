@@ -617,10 +617,14 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
 
     # 5. progressive removal: duplicate copies first (importance 0), then the greedy sequence
     boundary = flags_u[inverse]
-    anchor = anchor_u[inverse]
     is_rep = np.zeros(n, dtype=bool)
     is_rep[rep] = True
-    dup_order = np.flatnonzero(~is_rep & ~frozen & ~anchor)
+    # a copy adds nothing to what its representative keeps, flagged or sure of being kept:
+    # every copy but a frozen one goes first (a sure point's copies were kept with it, up to
+    # a fifth of the count on a cloud whose points were all doubled)
+    anchor = np.zeros(n, dtype=bool)
+    anchor[rep] = anchor_u
+    dup_order = np.flatnonzero(~is_rep & ~frozen)
     never_u = anchor_u | frozen[rep]  # never removed
     n_remove = n - target
     to_target = max(0, n_remove - dup_order.size)
