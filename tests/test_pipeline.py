@@ -30,6 +30,24 @@ def bunny(data_dir, tmp_path_factory):
     return X, path
 
 
+def test_a_cut_that_leaves_tiles_empty_says_so(tmp_path, caplog):
+    """One point kept of a strip 200 long in several tiles: the views of the tiles far from
+    it (ten halos, 22 wide) hold no kept point, whose distance is inf. The run writes its
+    point and says in words why it does not refine (it printed "points inf from the nearest
+    kept point")."""
+    rng = np.random.default_rng(3)
+    X = np.c_[rng.random((4000, 2)) * [200.0, 1.0], np.zeros(4000)]
+    path = tmp_path / "strip.npy"
+    np.save(path, X)
+    with caplog.at_level("WARNING", logger="tiledsimplify"):
+        s = run(path, tmp_path / "one.npy", count=1, tile_points=1000, progress=False)
+    assert s.n_output == 1 and s.n_tiles >= 4 and not s.refined
+    assert len(np.load(tmp_path / "one.npy")) == 1
+    warned = [r.getMessage() for r in caplog.records if "no gap refinement" in r.getMessage()]
+    assert len(warned) == 1 and "points with no kept point within 10 halos" in warned[0]
+    assert "inf" not in warned[0]
+
+
 def test_global_cut_is_exact_and_prefers_flat_tiles():
     flat = np.linspace(0.0, 0.1, 100)
     curved = np.linspace(0.0, 10.0, 100)

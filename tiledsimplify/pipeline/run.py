@@ -1127,10 +1127,11 @@ def _refine(ts, store_path, prefix, scheduler, workers, client, progress, edge_r
             wide = MAX_WIDTH * ts.halo  # distance up to its width is exact, so a largest
             g = max(gaps(range(ts.n_tiles), wide).values(), default=0.0)  # one within is G
             bound = False
-            if not g <= wide:
-                log.warning("no gap refinement: the cut leaves points %.4g from the nearest kept "
-                            "point, farther than %g halos (%.4g); give a wider --halo to refine",
-                            g, MAX_WIDTH, MAX_WIDTH * ts.halo)
+            if not g <= wide:  # inf: tiles whose view holds no kept point at all
+                far = (f"points {g:.4g} from the nearest kept point, farther than"
+                       if math.isfinite(g) else "points with no kept point within")
+                log.warning("no gap refinement: the cut leaves %s %g halos (%.4g); give a "
+                            "wider --halo to refine", far, MAX_WIDTH, MAX_WIDTH * ts.halo)
                 return False
         if g > ts.halo:
             log.info("the cut leaves points %s%.4g from the nearest kept point, beyond the halo "
