@@ -234,3 +234,95 @@ def test_an_output_directory_access_calls_writable_is_refused_before_the_work(
     assert points_out.cannot_write_in(tmp_path) is None
     assert [p.name for p in tmp_path.iterdir()] == (["locked"] if where.parent == tmp_path
                                                     else [])
+
+
+def test_colour_is_written_8_bit():
+    """16-bit LAS colour in a points file: v >> 8, so 8-bit colour read as 257 v or written as
+    256 v comes back as v; an input whose colour never exceeds 255 held 8-bit values."""
+    from tiledsimplify.io.points_out import attribute_columns, attribute_dtypes, colour_8bit
+    v = np.array([0, 1, 127, 128, 254, 255])
+    assert np.array_equal(colour_8bit(257 * v), v) and np.array_equal(colour_8bit(256 * v), v)
+    assert np.array_equal(colour_8bit(v, colour_max=255), v)
+    assert np.array_equal(colour_8bit(np.array([65535, 300]), colour_max=65535), [255, 1])
+    attrs = {"red": 257 * v, "intensity": np.arange(6, dtype=np.uint16),
+             "flag": np.ones(6, dtype=bool), "rgb": np.zeros((6, 3), dtype=np.uint16),
+             "sharp_edge": np.ones(6, dtype=np.uint8), "odd name": np.zeros(6, dtype=np.int32)}
+    cols = attribute_columns(attrs, reserved={"sharp_edge"})
+    spec = {k: (a.dtype, a.shape[1:]) for k, a in attrs.items()}
+    dtypes = attribute_dtypes(spec, reserved={"sharp_edge"})
+    assert list(cols) == list(dtypes) == ["red", "intensity", "flag", "rgb_0", "rgb_1",
+                                          "rgb_2", "odd_name"]
+    assert all(cols[k].dtype == dtypes[k] and cols[k].shape == (6,) for k in cols)
+    assert np.array_equal(cols["red"], v) and dtypes["flag"] == np.uint8
+
+
+def _rows_of(xyz, X):
+    """The row of ``X`` each point of ``xyz`` is (the same coordinates, bit for bit)."""
+    at = {tuple(p): i for i, p in enumerate(X.tolist())}
+    return np.array([at[tuple(p)] for p in xyz.tolist()])
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".ply", ".csv"])
+def test_a_points_file_carries_every_dimension_of_a_las_input(data_dir, tmp_path, suffix):
+    """LAS in, NPY / PLY / CSV out, by `run` and by `simplify`: every dimension of the input
+    is a column, its values the input's at the kept points, then the simplifier's. They wrote
+    x, y, z, sharp_edge and normals only. (autzen's colour is 8-bit in 16-bit fields, so
+    it is written as it is; 16-bit colour, v >> 8: above.)"""
+    laspy = pytest.importorskip("laspy")
+    from tiledsimplify.cli import main
+    from tiledsimplify.io.columns import read_columns
+    las = laspy.read(data_dir / "lidar" / "autzen_trim.laz")
+    small = laspy.LasData(las.header)
+    small.points = las.points[:12_000]
+    path = tmp_path / "autzen.laz"
+    small.write(path)
+    las = laspy.read(path)
+    X = np.c_[las.x, las.y, las.z]
+    names = [d for d in las.point_format.dimension_names if d not in ("X", "Y", "Z")]
+    assert {"intensity", "classification", "gps_time", "red"} <= set(names)
+    top = max(int(las[c].max()) for c in ("red", "green", "blue"))
+    assert top <= 255  # this file holds 8-bit colour in its 16-bit fields: written as it is
+    for command in ("run", "simplify"):
+        out = tmp_path / f"{command}{suffix}"
+        assert main([command, str(path), str(out), "--ratio", "0.2", "-q"]) == 0
+        xyz, cols = read_columns(out)
+        assert list(cols)[:len(names)] == names
+        assert list(cols)[len(names):][:1] == ["sharp_edge"]
+        rows = _rows_of(xyz, X)
+        assert len(rows) == round(0.2 * len(X))
+        for name in names:
+            want = np.asarray(las[name])[rows]
+            np.testing.assert_array_equal(cols[name], want, err_msg=f"{command} {name}")
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".csv"])
+def test_a_coloured_ply_keeps_its_colour(tmp_path, suffix):
+    """A PLY with 8-bit colour, through `run` and `simplify` to PLY or CSV: the same 8-bit
+    colour at every kept point (the PLY output's properties uchar)."""
+    from tiledsimplify.cli import main
+    from tiledsimplify.io.columns import read_columns
+    rng = np.random.default_rng(2)
+    n = 6000
+    dt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"),
+                   ("blue", "u1")])
+    v = np.empty(n, dt)
+    v["x"], v["y"] = rng.random(n), rng.random(n)
+    v["z"] = 0.2 * np.abs(v["x"] - 0.5)  # a fold: flags too
+    for c in ("red", "green", "blue"):
+        v[c] = rng.integers(0, 256, n)
+    path = tmp_path / "coloured.ply"
+    head = ["ply", "format binary_little_endian 1.0", f"element vertex {n}"]
+    head += [f"property float {a}" for a in "xyz"]
+    head += [f"property uchar {c}" for c in ("red", "green", "blue")] + ["end_header\n"]
+    path.write_bytes("\n".join(head).encode() + v.tobytes())
+    X = np.c_[v["x"], v["y"], v["z"]].astype(np.float64)
+    for command in ("run", "simplify"):
+        out = tmp_path / f"{command}{suffix}"
+        assert main([command, str(path), str(out), "--ratio", "0.1", "-q"]) == 0
+        xyz, cols = read_columns(out)
+        rows = _rows_of(xyz, X)
+        assert len(rows) == n // 10
+        for c in ("red", "green", "blue"):
+            np.testing.assert_array_equal(cols[c], v[c][rows])
+        if suffix == ".ply":
+            assert b"property uchar red" in out.read_bytes()[:400]

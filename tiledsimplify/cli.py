@@ -28,13 +28,15 @@ from .core.simplify import PEAK_BYTES_PER_POINT
 from .errors import BudgetWarning, FileFormatError, InputError, TiledSimplifyError
 from .io.las import LAS_SUFFIXES
 from .io.points_out import (
+    attribute_columns,
     check_not_input,
     check_output,
     check_writable,
+    largest_colour,
     write_json,
     write_points,
 )
-from .io.sources import degrees_message, open_source, read_all
+from .io.sources import degrees_message, open_source, read_all, read_all_dimensions
 
 log = logging.getLogger("tiledsimplify")
 
@@ -168,8 +170,10 @@ def _parser():
     s = sub.add_parser(
         "simplify", help="simplify one cloud held in memory",
         description="Simplify one point cloud in memory, keeping and flagging sharp-edge "
-                    "points. Output columns: sharp_edge, importance (at removal; NaN for kept "
-                    "points), simplify_rank (removal order; -1 for kept), nx, ny, nz.")
+                    "points. Output columns: the input's dimensions (LAS dimensions, E57 and "
+                    "PLY intensity and colour; colour 8-bit), sharp_edge, importance (at "
+                    "removal; NaN for kept points), simplify_rank (removal order; -1 for "
+                    "kept), nx, ny, nz.")
     s.add_argument("input", help="LAS/LAZ (file, folder or glob), E57, PLY, OBJ/OFF/STL "
                                  "(vertices), XYZ/CSV/TXT or NPY; .gz allowed")
     s.add_argument("output", help="output .ply, .npy, .xyz or .csv")
@@ -199,8 +203,9 @@ def _parser():
         description="Stream the input into a zarr tile store, simplify every tile with the "
                     "points of its halo as neighbours (on dask workers), cut all tiles at one "
                     "global budget, refine the gaps and write one output. LAS/LAZ output keeps "
-                    "every input dimension and adds sharp_edge, "
-                    "importance, simplify_rank.")
+                    "every input dimension and adds sharp_edge, importance, simplify_rank; "
+                    "PLY/NPY/XYZ/CSV output has the input's dimensions (colour 8-bit), then "
+                    "sharp_edge, nx, ny, nz.")
     r.add_argument("input", help="LAS/LAZ file, folder or glob of LAS/LAZ tiles; E57 file, "
                                  "folder or glob; or PLY, XYZ/CSV/TXT, NPY")
     r.add_argument("output", help="output .las/.laz (LAS input), .ply, .npy, .xyz or .csv")
@@ -497,7 +502,7 @@ def _simplify(args):
     check_not_input(args.output, [args.input])
     source = open_source(args.input)
     check_memory(args.input, source.count)
-    xyz = read_all(source)
+    xyz, dims = read_all_dimensions(source)
     log.info("read %d points from %s in %.2f s", len(xyz), args.input, time.perf_counter() - t0)
     if len(xyz) == 0:
         raise TiledSimplifyError(f"{args.input}: the input has no points; nothing to simplify. "
@@ -517,7 +522,10 @@ def _simplify(args):
              "(threshold %.3g)", st["seconds_neighbours_normals"], st["seconds_boundary"],
              st["seconds_removal"], st["n_boundary"], res.threshold)
     sel = np.ones(res.n, bool) if args.all_points else res.keep
-    columns = {
+    own = ("sharp_edge", "importance", "simplify_rank", "nx", "ny", "nz")
+    columns = {  # the input's dimensions first (colour 8-bit), then the simplifier's
+        **attribute_columns({name: v[sel] for name, v in dims.items()}, largest_colour(dims),
+                            own),
         "sharp_edge": res.boundary[sel].astype(np.uint8),
         "importance": res.importance[sel],
         "simplify_rank": res.rank[sel],

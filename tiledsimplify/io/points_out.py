@@ -9,6 +9,7 @@ order one tile at a time.
 import contextlib
 import errno
 import os
+import re
 import shutil
 import tempfile
 from pathlib import Path
@@ -48,6 +49,77 @@ def record_bytes(dtypes):
     """Bytes of one output record with these columns after x, y, z (NPY and PLY: exactly;
     text: its fixed-size records, written before the lines)."""
     return _fields(dtypes).itemsize
+
+
+#: the LAS colour dimensions, which the tile store and the sources carry 16-bit; a points
+#: file gets them 8-bit (:func:`colour_8bit`), as PLY and text readers expect colour
+COLOURS = ("red", "green", "blue")
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]")
+
+
+def colour_8bit(values, colour_max=None):
+    """16-bit LAS colour as 8 bits: ``v >> 8``, so 8-bit colour read as 257 v (a PLY's, an
+    E57's) or written as 256 v (many LAS writers) comes back as v. Where no colour value of
+    the input exceeds 255 (``colour_max``), the input held 8-bit values in 16-bit fields, as
+    some LAS writers do: kept as they are."""
+    v = np.asarray(values)
+    if colour_max is not None and colour_max <= 255:
+        return v.astype(np.uint8)
+    return (v.astype(np.uint16) >> 8).astype(np.uint8)
+
+
+def _attribute_names(name, trail):
+    """The columns of one attribute: its name (letters, digits, ``_ . -``: a PLY property
+    or a header word), one per element (``name_0``...) if it has a trailing shape."""
+    name = _UNSAFE.sub("_", str(name))
+    size = int(np.prod(tuple(trail), dtype=np.int64))
+    return [name] if not tuple(trail) else [f"{name}_{i}" for i in range(size)]
+
+
+def attribute_dtypes(spec, reserved=()):
+    """The columns (name -> dtype) a points file gets from the input's per-point attributes,
+    given as ``{name: (dtype, trailing shape)}``: the columns :func:`attribute_columns` makes.
+    Attributes named in ``reserved`` (x, y, z, the simplifier's own columns: an input
+    simplified before carries its old ones) are left out; bool becomes uint8."""
+    out = {}
+    for name, (dtype, trail) in spec.items():
+        if name in reserved or name in ("x", "y", "z"):
+            continue
+        dt = np.dtype(np.uint8) if name in COLOURS or np.dtype(dtype) == bool \
+            else np.dtype(dtype)
+        for col in _attribute_names(name, trail):
+            out[col] = dt
+    return out
+
+
+def attribute_columns(attrs, colour_max=None, reserved=()):
+    """The columns (name -> (n,) array) a points file gets from per-point attributes
+    ``attrs`` (name -> (n, ...) array): each as it is, colour 8-bit (:func:`colour_8bit`),
+    one column per element of a trailing shape (:func:`attribute_dtypes` gives their
+    dtypes)."""
+    out = {}
+    for name, values in attrs.items():
+        if name in reserved or name in ("x", "y", "z"):
+            continue
+        v = np.asarray(values)
+        if name in COLOURS:
+            v = colour_8bit(v, colour_max)
+        elif v.dtype == bool:
+            v = v.astype(np.uint8)
+        cols = _attribute_names(name, v.shape[1:])
+        flat = v.reshape(len(v), -1) if v.ndim > 1 else v[:, None]
+        for i, col in enumerate(cols):
+            out[col] = flat[:, i]
+    return out
+
+
+def largest_colour(attrs):
+    """The largest colour value in ``attrs`` (:data:`COLOURS`), None if it has no colour."""
+    found = [np.asarray(attrs[c]) for c in COLOURS if c in attrs]
+    if not found:
+        return None
+    return max((int(v.max()) for v in found if v.size), default=0)
 
 
 def _check_suffix(path, known):

@@ -571,3 +571,16 @@ def read_all(src):
     """Every point of an opened source (:func:`open_source`), as one (n, 3) float64 array."""
     parts = [xyz for _, xyz, _ in src.chunks()]
     return np.concatenate(parts) if parts else np.empty((0, 3))
+
+
+def read_all_dimensions(src):
+    """Every point of an opened source and what it carries: ``(xyz, {name: (n, ...)
+    array})`` — a LAS file's dimensions, an E57 or PLY file's intensity and colour (LAS
+    names and types), nothing for the other formats."""
+    parts, dims = [], {}
+    for _, xyz, attrs in src.chunks():
+        parts.append(xyz)
+        for name, values in attrs.items():
+            dims.setdefault(name, []).append(np.asarray(values))
+    xyz = np.concatenate(parts) if parts else np.empty((0, 3))
+    return xyz, {name: np.concatenate(v) for name, v in dims.items()}

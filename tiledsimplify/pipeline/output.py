@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import TiledSimplifyError
 from ..io.las import LAS_SUFFIXES
-from ..io.points_out import PointsAt
+from ..io.points_out import COLOURS, PointsAt, attribute_columns, attribute_dtypes
 from ..tiles import TileStore
 from .budget import kept_in_tile
 from .input_order import InputRanks
@@ -21,9 +21,24 @@ from .tile_task import NORMAL_DTYPE
 log = logging.getLogger("tiledsimplify")
 
 
-#: the columns of a non-LAS output after x, y, z (normals as the tile store keeps them)
+#: the columns of a non-LAS output after x, y, z and the input's dimensions (normals as the
+#: tile store keeps them)
 OUTPUT_COLUMNS = {"sharp_edge": np.uint8, "nx": NORMAL_DTYPE, "ny": NORMAL_DTYPE,
                   "nz": NORMAL_DTYPE}
+#: dimensions of the input a non-LAS output leaves out: its own columns, and the ones an
+#: input simplified before carries from that run (:data:`~tiledsimplify.io.las.SIMPLIFY_DIMS`)
+RESERVED = frozenset(OUTPUT_COLUMNS) | {"importance", "simplify_rank"}
+
+
+def carried(ts):
+    """What a non-LAS output carries of the input's dimensions (LAS dimensions, E57 and PLY
+    intensity and colour): ``(columns' dtypes, the largest colour value or None)`` — colour
+    is written 8-bit (:func:`~tiledsimplify.io.points_out.colour_8bit`)."""
+    spec = {name: (np.dtype(v["dtype"]), tuple(v["shape"]))
+            for name, v in ts.root_attrs["attributes"].items()}
+    top = ts.attribute_max
+    colour = max((top[c] for c in COLOURS if c in top), default=None)
+    return attribute_dtypes(spec, RESERVED), colour
 
 
 def _keep(ts, tile, prefix, refined):
@@ -151,11 +166,13 @@ def write_output(ts, source, output, prefix, refined=False, client=None):
         ranks.add(index)
     n_out = len(ranks)
     done = 0
-    with PointsAt(output, n_out, OUTPUT_COLUMNS, progress=Written(n_out, "formatted as text")
-                  ) as out:
-        for idx, xyz, boundary, nrm in _in_tile_order(
+    dtypes, colour = carried(ts)
+    with PointsAt(output, n_out, {**dtypes, **OUTPUT_COLUMNS},
+                  progress=Written(n_out, "formatted as text")) as out:
+        for idx, xyz, boundary, nrm, attrs in _in_tile_order(
                 _tile_points, lambda i: (path, i, prefix, refined), ts.n_tiles, client):
             out.write(ranks.rank(idx), xyz, {
+                **attribute_columns(attrs, colour, RESERVED),
                 "sharp_edge": boundary.astype(np.uint8),
                 "nx": nrm[:, 0], "ny": nrm[:, 1], "nz": nrm[:, 2]})
             n_boundary += int(boundary.sum())
@@ -221,9 +238,12 @@ def _tile_kept_index(store_path, tile, prefix, refined):
 
 
 def _tile_points(store_path, tile, prefix, refined):
-    """A tile's kept core points for a non-LAS output: ``(index, xyz, boundary, normals)``
-    (read where this runs)."""
+    """A tile's kept core points for a non-LAS output: ``(index, xyz, boundary, normals,
+    the input's dimensions)`` (read where this runs)."""
     ts = TileStore.open(store_path)
     keep, boundary = _kept(ts, tile, prefix, refined)
     xyz, idx = ts.core(tile)
-    return idx[keep], xyz[keep], boundary[keep], ts.read_result(tile, "normal")[keep]
+    attrs = ({name: values[keep] for name, values in ts.attrs(tile).items()}
+             if ts.attribute_names and keep.any() else {})
+    return (idx[keep], xyz[keep], boundary[keep], ts.read_result(tile, "normal")[keep],
+            attrs)

@@ -310,16 +310,17 @@ class ReadOnce:
 def scan_part(part, sample_size: int, seed: int, limit: int | None, progress=None) -> dict:
     """Pass 1 of the ingest over one part of the input: its chunks' ``(start, size)``, its
     bounds, its sample (the part's smallest keys, below ``limit`` if given:
-    :class:`sampling.BottomK`) and the attribute schema of its first chunk. Runs where
-    ``map_parts`` puts it."""
+    :class:`sampling.BottomK`), the attribute schema of its first chunk and the largest value
+    of each integer attribute. Runs where ``map_parts`` puts it."""
     check = ChunkChecker()
     sampler = BottomK(sample_size, seed, limit)
     intervals: list[tuple[int, int]] = []
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     read = 0
+    top: dict[str, int] = {}  # each integer attribute's largest value
     for item in read_ahead(part()):
-        start, xyz, _ = check(item)
+        start, xyz, attrs = check(item)
         m = xyz.shape[0]
         intervals.append((start, m))
         read += m
@@ -327,12 +328,26 @@ def scan_part(part, sample_size: int, seed: int, limit: int | None, progress=Non
             progress(read)
         if not m:
             continue
+        for name, values in attrs.items():
+            if values.dtype.kind in "iu":
+                v = int(values.max())
+                top[name] = max(v, top.get(name, v))
         c_lo, c_hi = box(xyz)
         lo = np.minimum(lo, c_lo)
         hi = np.maximum(hi, c_hi)
         sampler.add(start, xyz)
     return {"points": read, "intervals": intervals, "lo": lo, "hi": hi, "keys": sampler.keys,
-            "index": sampler.index, "xyz": sampler.xyz, "spec": check.spec}
+            "index": sampler.index, "xyz": sampler.xyz, "spec": check.spec,
+            "attribute_max": top}
+
+
+def merge_max(tops):
+    """The largest value of each integer attribute over the parts' (:func:`scan_part`)."""
+    out: dict[str, int] = {}
+    for top in tops:
+        for name, v in top.items():
+            out[name] = max(int(v), out.get(name, int(v)))
+    return out
 
 
 def merge_specs(specs):

@@ -24,7 +24,8 @@ Layout of the store directory (a zarr v3 group)::
 Root attributes: ``format``/``format_version``, ``complete`` (false until the ingest has
 finished), ``plan`` (:meth:`TilePlan.to_dict`), ``halo``, ``halo_is_default``, ``spacing``,
 ``spacing_estimate`` (how it was obtained), ``n_total``, ``tile_points``, ``tile_counts``,
-``bounds``, ``chunk_rows``, ``attributes`` (name -> dtype and trailing shape), ``sample_size``,
+``bounds``, ``chunk_rows``, ``attributes`` (name -> dtype and trailing shape),
+``attribute_max`` (name -> the largest value, integer attributes; since 2026-12-07), ``sample_size``,
 ``seed``, ``ingest_parts``, ``part_starts`` and ``part_counts`` (below), ``config`` (the caller's
 dict) and ``provenance`` (the caller's dict plus package,
 zarr and numpy versions and the UTC creation time).
@@ -60,7 +61,8 @@ import zarr
 from zarr.core.group import GroupMetadata
 
 from ..errors import InputError, TiledSimplifyError
-from .ingest import ReadOnce, fill_part, lay_out_tiles, map_here, merge_specs, scan_part
+from .ingest import (ReadOnce, fill_part, lay_out_tiles, map_here, merge_max, merge_specs,
+                     scan_part)
 from .layout import (NAME_RE, array_templates, attribute_layout, codec, tile_nodes,
                      unpack_attribute)
 from .local_store import InlineStore
@@ -350,6 +352,7 @@ class TileStore:
             "chunk_rows": chunk_rows,
             "attributes": {k: {"dtype": dt.str, "shape": list(tr)} for k, (dt, tr)
                            in spec.items()},
+            "attribute_max": merge_max(scan.get("attribute_max", {}) for scan in scans),
             "sample_size": sample_size,
             "seed": int(seed),
             "ingest_parts": n_parts,
@@ -526,6 +529,12 @@ class TileStore:
     def attribute_dtypes(self) -> dict[str, np.dtype]:
         """Dtype of each stored attribute."""
         return {k: np.dtype(v["dtype"]) for k, v in self._attrs["attributes"].items()}
+
+    @property
+    def attribute_max(self) -> dict[str, int]:
+        """The largest value of each integer attribute in the input ({} for a store made
+        before 2026-12-07)."""
+        return {k: int(v) for k, v in self._attrs.get("attribute_max", {}).items()}
 
     @property
     def root_attrs(self) -> dict:
