@@ -326,3 +326,83 @@ def test_a_coloured_ply_keeps_its_colour(tmp_path, suffix):
             np.testing.assert_array_equal(cols[c], v[c][rows])
         if suffix == ".ply":
             assert b"property uchar red" in out.read_bytes()[:400]
+
+
+def _ply_with_properties(path, fmt, n=5000, seed=4):
+    """A PLY of ``n`` vertices on a folded sheet with colour, normals, a float ``confidence``
+    and a uint16 ``quality``, binary or ASCII; returns the vertex table."""
+    rng = np.random.default_rng(seed)
+    dt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"),
+                   ("nz", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1"),
+                   ("confidence", "<f4"), ("quality", "<u2")])
+    v = np.zeros(n, dt)
+    v["x"], v["y"] = rng.random(n), rng.random(n)
+    v["z"] = 0.2 * np.abs(v["x"] - 0.5)
+    v["nz"] = 1.0
+    for c in ("red", "green", "blue"):
+        v[c] = rng.integers(0, 256, n)
+    v["confidence"] = rng.random(n).astype(np.float32)
+    v["quality"] = rng.integers(0, 65536, n)
+    types = {"f4": "float", "u1": "uchar", "u2": "ushort"}
+    head = ["ply", f"format {fmt} 1.0", f"element vertex {n}"]
+    head += [f"property {types[dt[name].str[1:]]} {name}" for name in dt.names]
+    head += ["end_header"]
+    if fmt == "ascii":
+        lines = [" ".join(repr(float(x)) if dt[k].kind == "f" else str(int(x))
+                          for k, x in zip(dt.names, row)) for row in v.tolist()]
+        path.write_text("\n".join(head + lines) + "\n")
+    else:
+        path.write_bytes("\n".join(head).encode() + b"\n" + v.tobytes())
+    return v
+
+
+@pytest.mark.parametrize("fmt", ["binary_little_endian", "ascii"])
+def test_a_ply_keeps_every_vertex_property(tmp_path, fmt):
+    """A PLY's vertex properties, not only its colour, come through `run` and `simplify` to a
+    points file with their own names, types and values; its normals are replaced by the
+    simplifier's (one nx column), and a LAS output takes its integer properties that are LAS
+    dimensions (none here) but not a float one."""
+    from tiledsimplify.cli import main
+    from tiledsimplify.io.columns import read_columns
+    path = tmp_path / "props.ply"
+    v = _ply_with_properties(path, fmt)
+    X = np.c_[v["x"], v["y"], v["z"]].astype(np.float64)
+    for command in ("run", "simplify"):
+        out = tmp_path / f"{command}.npy"
+        assert main([command, str(path), str(out), "--ratio", "0.1", "-q"]) == 0
+        table = np.load(out)
+        assert table.dtype.names[:8] == ("x", "y", "z", "red", "green", "blue", "confidence",
+                                         "quality")
+        assert table.dtype.names.count("nx") == 1
+        assert table["confidence"].dtype == np.float32 and table["quality"].dtype == np.uint16
+        rows = _rows_of(np.c_[table["x"], table["y"], table["z"]], X)
+        assert len(rows) == 500
+        for name in ("red", "green", "blue", "confidence", "quality"):
+            np.testing.assert_array_equal(table[name], v[name][rows], err_msg=name)
+        assert not np.array_equal(table["nz"], np.ones(500, np.float32))  # the fold's
+    xyz, cols = read_columns(tmp_path / "run.npy")
+    assert "quality" in cols
+
+
+def test_the_bunnys_confidence_and_intensity_come_through(data_dir, tmp_path):
+    """The Stanford Bunny (a gzipped ASCII PLY mesh, read whole) keeps its vertices'
+    ``confidence`` and ``intensity`` in a points file; its float intensity (0..1) is not cast
+    into a LAS output's 16-bit intensity (0 there, as before)."""
+    laspy = pytest.importorskip("laspy")
+    from tiledsimplify.cli import main
+    from tiledsimplify.io.mesh import read_ply_vertices
+    src = data_dir / "meshes" / "stanford_bunny" / "bun_zipper.ply.gz"
+    v = read_ply_vertices(src)
+    assert v.dtype.names == ("x", "y", "z", "confidence", "intensity")
+    X = np.c_[v["x"], v["y"], v["z"]]
+    out = tmp_path / "b.ply"
+    assert main(["run", str(src), str(out), "--ratio", "0.1", "--tile-points", "6000",
+                 "-q"]) == 0
+    from tiledsimplify.io.columns import read_columns
+    xyz, cols = read_columns(out)
+    rows = _rows_of(xyz, X)
+    assert len(rows) == 3595 and list(cols)[:2] == ["confidence", "intensity"]
+    for name in ("confidence", "intensity"):
+        np.testing.assert_array_equal(cols[name], v[name][rows])
+    assert main(["run", str(src), str(tmp_path / "b.laz"), "--ratio", "0.1", "-q"]) == 0
+    assert not laspy.read(tmp_path / "b.laz").intensity.any()

@@ -404,7 +404,7 @@ def _is_number(tok) -> bool:
     return True
 
 
-def _read_ply(path: Path, data: bytes, want_faces: bool):
+def _read_ply(path: Path, data: bytes, want_faces: bool, all_props: bool = False):
     fmt, elements, body_start = _parse_ply_header(path, data)
     names = [e.name for e in elements]
     vname = next((nm for nm in ("vertex", "vertices") if nm in names), None)
@@ -439,6 +439,8 @@ def _read_ply(path: Path, data: bytes, want_faces: bool):
                 _fail(path, f"the PLY face property '{face_prop}' is not a list",
                       "declare it as 'property list uchar int vertex_indices'")
     last_needed = max(names.index(vname), names.index(fname) if fname else -1)
+    vwanted = set("xyz") | ({p.name for p in velem.props if not p.is_list} if all_props
+                            else set())
 
     results: dict = {}
     if fmt == "ascii":
@@ -446,17 +448,29 @@ def _read_ply(path: Path, data: bytes, want_faces: bool):
         tokens = body.split()
         pos = 0
         for i, elem in enumerate(elements[: last_needed + 1]):
-            wanted = set("xyz") if elem.name == vname else ({face_prop} if elem.name == fname else set())
+            wanted = (vwanted if elem.name == vname
+                      else {face_prop} if elem.name == fname else set())
             res, pos = _read_ply_ascii_element(path, tokens, pos, elem, wanted)
             results[elem.name] = res
     else:
         endian = "<" if fmt == "binary_little_endian" else ">"
         offset = body_start
         for i, elem in enumerate(elements[: last_needed + 1]):
-            wanted = set("xyz") if elem.name == vname else ({face_prop} if elem.name == fname else set())
+            wanted = (vwanted if elem.name == vname
+                      else {face_prop} if elem.name == fname else set())
             res, offset = _read_ply_binary_element(path, data, offset, elem, endian, wanted)
             results[elem.name] = res
     v = results[vname]
+    if all_props:  # every scalar property, each of its own type, in the header's order;
+        # x, y, z float64, as :func:`read_points` gives them (ASCII: the text's digits)
+        props = [p for p in velem.props if not p.is_list]
+        table = np.empty(velem.count, dtype=[
+            (p.name, np.float64 if p.name in ("x", "y", "z")
+             else np.dtype(p.code).newbyteorder("="))
+            for p in props])
+        for p in props:
+            table[p.name] = v[p.name]
+        return table, None
     vertices = np.column_stack([np.asarray(v[a], dtype=np.float64) for a in "xyz"]).reshape(-1, 3)
     if not want_faces:
         return vertices, None
@@ -805,6 +819,17 @@ def read_mesh(path, *, merge_tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]
         _fail(path, f"unsupported mesh file type {suffix or '(no suffix)'!r}",
               f"use one of {', '.join(MESH_SUFFIXES)} (optionally with .gz)")
     return reader(path, data)
+
+
+def read_ply_vertices(path) -> np.ndarray:
+    """Every scalar property of a PLY file's vertices (optionally gzip-compressed), as a
+    structured array: x, y, z and the rest, each of its own type (the Stanford Bunny's
+    ``confidence`` and ``intensity``, a scan's colour). Other elements (faces, a range grid)
+    are skipped."""
+    path, data, suffix = _load(path)
+    if suffix != ".ply":
+        _fail(path, f"not a PLY file ({suffix or 'no suffix'})", "give a .ply or .ply.gz file")
+    return _read_ply(path, data, want_faces=False, all_props=True)[0]
 
 
 def read_points(path) -> np.ndarray:

@@ -9,6 +9,7 @@ Compressed (``.gz``) point files and meshes (OBJ/OFF/STL) are read whole.
 
 import io
 import itertools
+import re
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ import numpy as np
 from ..core.bounds import finite_rows
 from ..errors import FileFormatError, InputError
 from .las import LasSource, las_files, part_ranges
-from .mesh import _PLY_TYPES, _parse_ply_header, read_points
+from .mesh import _PLY_TYPES, _parse_ply_header, read_ply_vertices, read_points
 
 TEXT_SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".asc")
 #: PLY vertex properties read as the LAS colour dimensions (all three, or none)
@@ -34,6 +35,39 @@ def ply_colours(names):
             return {}
         found[las] = name
     return found
+
+
+#: PLY vertex properties a source does not carry: the position, and normals (the
+#: simplifier's own replace them in every output)
+PLY_SKIP = frozenset({"x", "y", "z", "nx", "ny", "nz"})
+_UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]")
+
+
+def ply_dimensions(names, codes):
+    """What a PLY vertex with properties ``names`` (numpy types ``codes``) carries:
+    ``[(dimension, property, code, is_colour)]`` — its colour as the LAS colour dimensions
+    (:func:`ply_colours`, 16-bit: :func:`colour_uint16`), every other property but
+    :data:`PLY_SKIP` under its own name (letters, digits, ``_ . -``) and type, as a scan's
+    ``confidence`` and ``intensity`` (the Stanford Bunny's)."""
+    found = ply_colours(names)
+    out = [(las, name, codes[name], True) for las, name in found.items()]
+    taken = {las for las in found}
+    for name in names:
+        if name in PLY_SKIP or name in found.values():
+            continue
+        dim = _UNSAFE.sub("_", name)
+        if dim in taken or not dim[:1].isalnum() and dim[:1] != "_":
+            continue  # a name two properties would share, or not one a store key takes
+        taken.add(dim)
+        out.append((dim, name, codes[name], False))
+    return out
+
+
+def ply_values(values, code, is_colour):
+    """One PLY property's values as a dimension (:func:`ply_dimensions`), native byte order."""
+    if is_colour:
+        return colour_uint16(values, code)
+    return np.asarray(values).astype(np.dtype(code).newbyteorder("="))
 
 
 def to_uint16(values, span):
@@ -159,10 +193,12 @@ class ColumnsSource(ArraySource):
 
     @staticmethod
     def _attrs(arr, start, stop):
-        """The LAS colour dimensions of a PLY vertex with colour properties."""
-        found = ply_colours(arr.dtype.names)
-        part = arr[start:stop] if found else None
-        return {las: colour_uint16(part[name], arr.dtype[name]) for las, name in found.items()}
+        """The dimensions a PLY vertex carries (:func:`ply_dimensions`): colour as the LAS
+        colour, the other properties as they are."""
+        dims = ply_dimensions(arr.dtype.names, {n: arr.dtype[n] for n in arr.dtype.names})
+        part = arr[start:stop] if dims else None
+        return {dim: ply_values(part[name], code, colour)
+                for dim, name, code, colour in dims}
 
 
 class MappedPart:
@@ -200,7 +236,7 @@ class TextSource:
     is_las = False
 
     def __init__(self, path, chunk_points, *, skip_lines, count, delimiter, offsets,
-                 colour=None, lines=None):
+                 dims=None, lines=None):
         self.files = [Path(path)]
         self.chunk_points = int(chunk_points)
         self._skip = skip_lines
@@ -211,7 +247,7 @@ class TextSource:
             lines = [skip_lines + k * self.chunk_points for k in range(len(self._offsets))]
             lines.append(skip_lines + self._count)
         self._lines = list(lines)  # and, last, the line after the last point
-        self._colour = colour  # an ASCII PLY's ((column, type) of red, green, blue)
+        self._dims = dims  # an ASCII PLY's ((column, dimension, type, is colour), ...)
 
     @property
     def count(self):
@@ -232,7 +268,7 @@ class TextSource:
         c = self.chunk_points
         return [TextPart(path, self._offsets[lo // c], lo, hi, c,
                          self._lines[lo // c:-(-hi // c) + 1],
-                         self._delimiter, self._count, self._colour)
+                         self._delimiter, self._count, self._dims)
                 for lo, hi in part_ranges(self._count, max_points, c)]
 
 
@@ -278,12 +314,12 @@ class TextPart:
     :func:`_is_point_line`, as :func:`_scan_points` counted them); pickles."""
 
     def __init__(self, path, offset, lo, hi, chunk_points, lines, delimiter, count,
-                 colour=None):
+                 dims=None):
         self.path, self.offset = Path(path), int(offset)
         self.lo, self.hi = int(lo), int(hi)
         self.chunk_points, self.lines = int(chunk_points), [int(v) for v in lines]
         self.delimiter, self.count = delimiter, int(count)
-        self.colour = colour
+        self.dims = dims
 
     def __call__(self):
         return self.chunks()
@@ -309,7 +345,7 @@ class TextPart:
                 if len(lines) < m:
                     raise FileFormatError(f"{path}: expected {self.count} points but the file "
                                           f"ends after {start + len(lines)}; it is truncated.")
-                cols = (0, 1, 2) + tuple(c for c, _ in (self.colour or ()))
+                cols = (0, 1, 2) + tuple(c for c, _, _, _ in (self.dims or ()))
                 try:
                     got = np.loadtxt(lines[:m], delimiter=self.delimiter, usecols=cols,
                                      dtype=np.float64, ndmin=2)
@@ -328,8 +364,8 @@ class TextPart:
                     raise FileFormatError(f"{path}: {m - len(got)} of the lines {first + 1} to "
                                           f"{first + span} hold no point; remove them.")
                 xyz = np.ascontiguousarray(got[:, :3])
-                attrs = {las: colour_uint16(got[:, 3 + j], code)
-                         for j, (las, (_, code)) in enumerate(zip(PLY_COLOURS, self.colour or ()))}
+                attrs = {dim: ply_values(got[:, 3 + j], code, colour)
+                         for j, (_, dim, code, colour) in enumerate(self.dims or ())}
                 bad = np.flatnonzero(~finite_rows(xyz))
                 if bad.size:  # "nan" and "inf" parse: name the line, as for a bad one
                     i = int(bad[0])
@@ -479,10 +515,10 @@ def _ply_source(path, chunk_points):
             return None
         offsets = _scan_lines(path, header_lines, chunk_points, vertex.count)[2]
         codes = {p.name: _PLY_TYPES.get(p.code, p.code) for p in vertex.props}
-        found = ply_colours(names)  # their columns and types
-        colour = tuple((names.index(name), codes[name]) for name in found.values()) or None
+        dims = tuple((names.index(name), dim, codes[name], colour)
+                     for dim, name, _, colour in ply_dimensions(names, codes)) or None
         return TextSource(path, chunk_points, skip_lines=header_lines, count=vertex.count,
-                          delimiter=None, offsets=offsets, colour=colour)
+                          delimiter=None, offsets=offsets, dims=dims)
     endian = "<" if fmt == "binary_little_endian" else ">"
     dtype = np.dtype([(p.name, endian + _PLY_TYPES.get(p.code, p.code)) for p in vertex.props])
     size = Path(path).stat().st_size
@@ -537,10 +573,17 @@ def open_source(spec, chunk_points=1_000_000):
     if not p.exists():
         raise FileNotFoundError(2, "No such file", str(p))
     suffix = p.suffix.lower()
+    ply = suffix == ".ply" or p.name.lower().endswith(".ply.gz")
     if suffix == ".ply":
         src = _ply_source(p, chunk_points)
         if src is not None:
             return src
+    if ply:  # gzipped, or a layout the chunked readers do not take: read whole
+        table = read_ply_vertices(p)
+        if ply_dimensions(table.dtype.names, {n: table.dtype[n] for n in table.dtype.names}):
+            return ColumnsSource(table, chunk_points, files=[p])
+        return ArraySource(np.stack([table[a] for a in "xyz"], axis=1).astype(np.float64),
+                           chunk_points, files=[p])
     if suffix in TEXT_SUFFIXES:
         skip, count, delimiter, offsets, lines = _text_layout(p, chunk_points)
         return TextSource(p, chunk_points, skip_lines=skip, count=count, delimiter=delimiter,
@@ -575,8 +618,9 @@ def read_all(src):
 
 def read_all_dimensions(src):
     """Every point of an opened source and what it carries: ``(xyz, {name: (n, ...)
-    array})`` — a LAS file's dimensions, an E57 or PLY file's intensity and colour (LAS
-    names and types), nothing for the other formats."""
+    array})`` — a LAS file's dimensions, a PLY's vertex properties (:func:`ply_dimensions`),
+    an E57 file's intensity and colour (LAS names and types), nothing for the other
+    formats."""
     parts, dims = [], {}
     for _, xyz, attrs in src.chunks():
         parts.append(xyz)

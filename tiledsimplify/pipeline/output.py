@@ -31,9 +31,9 @@ RESERVED = frozenset(OUTPUT_COLUMNS) | {"importance", "simplify_rank"}
 
 
 def carried(ts):
-    """What a non-LAS output carries of the input's dimensions (LAS dimensions, E57 and PLY
-    intensity and colour): ``(columns' dtypes, the largest colour value or None)`` — colour
-    is written 8-bit (:func:`~tiledsimplify.io.points_out.colour_8bit`)."""
+    """What a non-LAS output carries of the input's dimensions (LAS dimensions, PLY
+    properties, E57 intensity and colour): ``(columns' dtypes, the largest colour value or
+    None)`` — colour is written 8-bit (:func:`~tiledsimplify.io.points_out.colour_8bit`)."""
     spec = {name: (np.dtype(v["dtype"]), tuple(v["shape"]))
             for name, v in ts.root_attrs["attributes"].items()}
     top = ts.attribute_max
@@ -72,9 +72,11 @@ def _tile_piece(store_path, tile, prefix, refined, layout, is_las, start=None, e
     k = len(xyz)
     if is_las:
         attrs = {name: values[keep] for name, values in ts.attrs(tile).items()}
-    else:  # a new LAS 1.4 layout: the dimensions the input carried (E57 intensity, colour)
+    else:  # a new LAS 1.4 layout: the dimensions the input carried (E57 intensity, colour),
+        # integers only: a PLY's float intensity (0..1, the Bunny's) would round to 0 or 1
+        kinds = ts.attribute_dtypes
         stored = ts.attrs(tile, [name for name in layout.attribute_names
-                                 if name in ts.attribute_names])
+                                 if name in kinds and kinds[name].kind in "iu"])
         attrs = {name: stored[name][keep] if name in stored
                  else np.full(k, NEW_POINT_DEFAULTS.get(name, 0))
                  for name in layout.attribute_names}
