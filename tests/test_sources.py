@@ -360,3 +360,71 @@ def test_a_list_of_non_las_files_says_to_give_one_or_merge(tmp_path, cloud):
                        r"input.*Give one file of another format.*pdal merge") as err:
         open_source(paths)
     assert "in.e57" not in str(err.value)
+
+
+def _text_cloud(n=3000, seed=1):
+    rng = np.random.default_rng(seed)
+    xyz = np.round(np.c_[rng.random((n, 2)), 0.2 * np.abs(rng.random(n) - 0.5)], 6)
+    return xyz, rng.integers(0, 256, (n, 3)), rng.integers(0, 1000, n)
+
+
+def test_a_text_header_names_the_columns_it_carries(tmp_path):
+    """A text file's header names its columns: x, y, z found by name (any order, any case),
+    colour (R G B or red green blue, 0..255 or 0..1) read as the LAS colour, every other
+    column but the normals as float64 under its name — CloudCompare's ``//X,Y,Z,R,G,B``
+    header, a PTS file's count line and its ``x y z i r g b``. No header, or one that does not
+    match the columns: positions only, as before. They were positions only, whatever the
+    header said."""
+    xyz, rgb, inten = _text_cloud()
+    lines = ["%.6f,%.6f,%.6f,%d,%d,%d,%d" % (*p, *c, i) for p, c, i in zip(xyz, rgb, inten)]
+    (tmp_path / "cc.txt").write_text("//X,Y,Z,R,G,B,Intensity\n" + "\n".join(lines) + "\n")
+    lines = ["%.6f %.6f %.6f %d %d %d %d" % (*p, i - 500, *c) for p, c, i in zip(xyz, rgb, inten)]
+    (tmp_path / "scan.pts").write_text(f"{len(xyz)}\n" + "\n".join(lines) + "\n")
+    lines = ["%d;%.6f;%.6f;%.6f;0;0;1" % (i, p[2], p[1], p[0]) for p, i in zip(xyz, inten)]
+    (tmp_path / "reord.csv").write_text("Quality;z;y;x;nx;ny;nz\n" + "\n".join(lines) + "\n")
+    lines = ["%.6f %.6f %.6f %.4f %.4f %.4f" % (*p, *(c / 255)) for p, c in zip(xyz, rgb)]
+    (tmp_path / "float.xyz").write_text("x y z red green blue\n" + "\n".join(lines) + "\n")
+    (tmp_path / "short.xyz").write_text("x y z red\n" + "\n".join(lines) + "\n")
+    (tmp_path / "none.xyz").write_text("\n".join(lines) + "\n")
+    lines = ["%.6f %.6f %.6f part%d %d" % (*p, i, i) for p, i in zip(xyz, inten)]
+    (tmp_path / "label.xyz").write_text("x y z label id\n" + "\n".join(lines) + "\n")
+    colour = {c: 257 * rgb[:, j] for j, c in enumerate(("red", "green", "blue"))}
+    want = {
+        "cc.txt": {**colour, "Intensity": inten.astype(float)},
+        "scan.pts": {"intensity": inten - 500.0, **colour},
+        "reord.csv": {"Quality": inten.astype(float)},
+        "float.xyz": {c: np.rint(np.round(v / 257 / 255, 4) * 65535) for c, v in colour.items()},
+        "short.xyz": {},
+        "none.xyz": {},
+        "label.xyz": {"id": inten.astype(float)},  # a column of words is not read
+    }
+    for name, dims in want.items():
+        src = open_source(tmp_path / name, chunk_points=700)
+        chunks = list(src.chunks())
+        got = np.concatenate([x for _, x, _ in chunks])
+        np.testing.assert_array_equal(got, xyz, err_msg=name)
+        for part in src.parts(1400):  # as a worker reads them
+            for start, x, a in part():
+                assert sorted(a) == sorted(dims), name
+        attrs = {k: np.concatenate([a[k] for _, _, a in chunks]) for k in dims}
+        assert list(chunks[0][2]) == list(dims), name
+        for k, v in dims.items():
+            np.testing.assert_array_equal(attrs[k], v, err_msg=f"{name} {k}")
+
+
+def test_a_run_on_a_cloudcompare_text_export_keeps_colour_and_intensity(tmp_path):
+    from tiledsimplify.cli import main
+    from tiledsimplify.io.columns import read_columns
+    xyz, rgb, inten = _text_cloud()
+    lines = ["%.6f,%.6f,%.6f,%d,%d,%d,%d" % (*p, *c, i) for p, c, i in zip(xyz, rgb, inten)]
+    (tmp_path / "cc.txt").write_text("//X,Y,Z,R,G,B,Intensity\n" + "\n".join(lines) + "\n")
+    at = {tuple(p): i for i, p in enumerate(xyz.tolist())}
+    for command in ("run", "simplify"):
+        out = tmp_path / f"{command}.csv"
+        assert main([command, str(tmp_path / "cc.txt"), str(out), "--ratio", "0.1", "-q"]) == 0
+        got, cols = read_columns(out)
+        rows = np.array([at[tuple(p)] for p in got.tolist()])
+        assert len(rows) == 300 and list(cols)[:4] == ["red", "green", "blue", "Intensity"]
+        for j, c in enumerate(("red", "green", "blue")):
+            np.testing.assert_array_equal(cols[c], rgb[rows, j])
+        np.testing.assert_array_equal(cols["Intensity"], inten[rows])

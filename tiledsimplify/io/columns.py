@@ -82,7 +82,7 @@ def read_columns(path):
             return _split({name: arr[name] for name in arr.dtype.names})
         return read_points(path), {}
     if suffix in TEXT_SUFFIXES:
-        skip, delimiter = _text_header(path)
+        skip, delimiter, _, _ = _text_header(path)
         if skip:  # the header is the line before the first point (after any comments)
             with open(path, encoding="ascii", errors="replace") as fh:
                 for _ in range(skip):

@@ -236,7 +236,7 @@ class TextSource:
     is_las = False
 
     def __init__(self, path, chunk_points, *, skip_lines, count, delimiter, offsets,
-                 dims=None, lines=None):
+                 dims=None, lines=None, xyz=(0, 1, 2)):
         self.files = [Path(path)]
         self.chunk_points = int(chunk_points)
         self._skip = skip_lines
@@ -247,7 +247,8 @@ class TextSource:
             lines = [skip_lines + k * self.chunk_points for k in range(len(self._offsets))]
             lines.append(skip_lines + self._count)
         self._lines = list(lines)  # and, last, the line after the last point
-        self._dims = dims  # an ASCII PLY's ((column, dimension, type, is colour), ...)
+        self._dims = dims  # ((column, dimension, type, is colour), ...): text_columns
+        self._xyz = tuple(xyz)  # the columns of x, y, z
 
     @property
     def count(self):
@@ -268,7 +269,7 @@ class TextSource:
         c = self.chunk_points
         return [TextPart(path, self._offsets[lo // c], lo, hi, c,
                          self._lines[lo // c:-(-hi // c) + 1],
-                         self._delimiter, self._count, self._dims)
+                         self._delimiter, self._count, self._dims, self._xyz)
                 for lo, hi in part_ranges(self._count, max_points, c)]
 
 
@@ -314,12 +315,13 @@ class TextPart:
     :func:`_is_point_line`, as :func:`_scan_points` counted them); pickles."""
 
     def __init__(self, path, offset, lo, hi, chunk_points, lines, delimiter, count,
-                 dims=None):
+                 dims=None, xyz=(0, 1, 2)):
         self.path, self.offset = Path(path), int(offset)
         self.lo, self.hi = int(lo), int(hi)
         self.chunk_points, self.lines = int(chunk_points), [int(v) for v in lines]
         self.delimiter, self.count = delimiter, int(count)
         self.dims = dims
+        self.xyz = tuple(xyz)
 
     def __call__(self):
         return self.chunks()
@@ -345,7 +347,7 @@ class TextPart:
                 if len(lines) < m:
                     raise FileFormatError(f"{path}: expected {self.count} points but the file "
                                           f"ends after {start + len(lines)}; it is truncated.")
-                cols = (0, 1, 2) + tuple(c for c, _, _, _ in (self.dims or ()))
+                cols = self.xyz + tuple(c for c, _, _, _ in (self.dims or ()))
                 try:
                     got = np.loadtxt(lines[:m], delimiter=self.delimiter, usecols=cols,
                                      dtype=np.float64, ndmin=2)
@@ -464,7 +466,7 @@ def _text_header(path):
     reader's rule, ``io.mesh``), else whitespace. Until 2026-12-04 only the file's first line
     was looked at, so a header after a ``#`` comment line was read as a point (an error), and
     a comment or header with a comma set the delimiter of whitespace-separated numbers."""
-    skip, header, data = 0, False, None
+    skip, header, data = 0, None, None
     with open(path, "rb") as fh:
         for index, raw in enumerate(fh):
             line = raw.decode("ascii", errors="replace")
@@ -476,24 +478,84 @@ def _text_header(path):
                 is_header = len(tokens) < 3
             except ValueError:
                 is_header = True
-            if is_header and not header and data is None:
-                skip, header = index + 1, True  # the one header line: look on for numbers
+            if is_header and header is None and data is None:
+                skip, header = index + 1, line  # the one header line: look on for numbers
                 continue
-            if not header:
+            if header is None:
                 skip = index
             data = line
             break
     sample = data if data is not None else ""
     delimiter = "," if "," in sample else ";" if ";" in sample else None
-    return skip, delimiter
+    return skip, delimiter, header, data
+
+
+def _split_line(line):
+    """A text line's words: split at commas, semicolons and whitespace, quotes dropped."""
+    return line.replace(",", " ").replace(";", " ").replace('"', " ").split()
+
+
+#: header names (lower case) of a text file's colour columns, the LAS colour dimensions'
+_TEXT_COLOURS = ({"red": "red", "green": "green", "blue": "blue"},
+                 {"r": "red", "g": "green", "b": "blue"})
+
+
+def text_columns(header, data):
+    """Which columns of a text point file are x, y, z, and what the others carry, from its
+    ``header`` line of names and its first ``data`` line: ``((x, y, z columns), dims)``,
+    ``dims`` as an ASCII PLY's (``(column, dimension, type, is colour)``, :class:`TextPart`)
+    or None. Without a header, or one whose names do not match the data's columns one for
+    one: the first three columns, nothing else (as before 2026-12-07). Else x, y, z by name
+    (any case; the first three if not named), colour from ``red green blue`` or ``R G B``
+    (0..255, or 0..1 where the first line's values have a decimal point and none is above 1:
+    CloudCompare's two ways) as the LAS colour, and every other column but the normals (``nx ny nz``) as float64
+    under its name (CloudCompare's ``//X`` header: its leading slashes dropped). A PTS file
+    (a first line holding the count, then ``x y z intensity [r g b]``) carries its intensity
+    and colour. A column whose first value is not a number is not read."""
+    if header is None or data is None:
+        return (0, 1, 2), None
+    names = [n.lstrip("/#") for n in _split_line(header)]
+    words = _split_line(data)
+    if len(names) == 1 and names[0].isdigit() and len(words) in (4, 7):  # PTS: a count
+        colour = [(4 + j, las, "u1", True) for j, las in enumerate(("red", "green", "blue"))]
+        return (0, 1, 2), ((3, "intensity", "f8", False),) + tuple(colour[:len(words) - 4])
+    if len(names) != len(words) or not all(names):
+        return (0, 1, 2), None
+    lower = [n.lower() for n in names]
+    xyz = tuple(lower.index(a) for a in "xyz") if {"x", "y", "z"} <= set(lower) else (0, 1, 2)
+    dims, taken = [], set()
+    for col, word in enumerate(words):  # a column of words (labels) stays unread, as before
+        try:
+            float(word)
+        except ValueError:
+            taken.add(col)
+    for scheme in _TEXT_COLOURS:
+        if set(scheme) <= set(lower) and not taken & {lower.index(c) for c in scheme}:
+            cols = [lower.index(c) for c in scheme]
+            code = ("f4" if any("." in words[c] for c in cols)
+                    and all(float(words[c]) <= 1.0 for c in cols) else "u1")
+            dims += [(c, las, code, True) for c, las in zip(cols, scheme.values())]
+            taken.update(cols)
+            break
+    seen = {d for _, d, _, _ in dims}
+    for col, name in enumerate(names):
+        if col in xyz or col in taken or lower[col] in ("nx", "ny", "nz"):
+            continue
+        dim = _UNSAFE.sub("_", name)
+        if dim in seen or not (dim[:1].isalnum() or dim[:1] == "_"):
+            continue
+        seen.add(dim)
+        dims.append((col, dim, "f8", False))
+    return xyz, tuple(dims) or None
 
 
 def _text_layout(path, chunk_points):
-    """(lines to skip, number of points, delimiter, chunk offsets, their line indices) of an
-    XYZ/CSV/TXT file, by one scan (:func:`_scan_points`)."""
-    skip, delimiter = _text_header(path)
+    """(lines to skip, number of points, delimiter, chunk offsets, their line indices, its
+    columns: :func:`text_columns`) of an XYZ/CSV/TXT file, by one scan
+    (:func:`_scan_points`)."""
+    skip, delimiter, header, data = _text_header(path)
     count, offsets, lines = _scan_points(path, skip, chunk_points)
-    return skip, count, delimiter, offsets, lines
+    return skip, count, delimiter, offsets, lines, text_columns(header, data)
 
 
 def _ply_source(path, chunk_points):
@@ -585,9 +647,9 @@ def open_source(spec, chunk_points=1_000_000):
         return ArraySource(np.stack([table[a] for a in "xyz"], axis=1).astype(np.float64),
                            chunk_points, files=[p])
     if suffix in TEXT_SUFFIXES:
-        skip, count, delimiter, offsets, lines = _text_layout(p, chunk_points)
+        skip, count, delimiter, offsets, lines, (xyz, dims) = _text_layout(p, chunk_points)
         return TextSource(p, chunk_points, skip_lines=skip, count=count, delimiter=delimiter,
-                          offsets=offsets, lines=lines)
+                          offsets=offsets, lines=lines, dims=dims, xyz=xyz)
     if suffix == ".npy":
         arr = _load_npy(p)
         mapped = None
