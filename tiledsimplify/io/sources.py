@@ -508,8 +508,9 @@ def text_columns(header, data):
     one: the first three columns, nothing else (as before 2026-12-07). Else x, y, z by name
     (any case; the first three if not named), colour from ``red green blue`` or ``R G B``
     (0..255, or 0..1 where the first line's values have a decimal point and none is above 1:
-    CloudCompare's two ways) as the LAS colour, and every other column but the normals (``nx ny nz``) as float64
-    under its name (CloudCompare's ``//X`` header: its leading slashes dropped). A PTS file
+    CloudCompare's two ways) as the LAS colour, and every other column but the normals
+    (``nx ny nz``) as float64 under its name (CloudCompare's ``//X`` header: its leading
+    slashes dropped). A PTS file
     (a first line holding the count, then ``x y z intensity [r g b]``) carries its intensity
     and colour. A column whose first value is not a number is not read."""
     if header is None or data is None:
