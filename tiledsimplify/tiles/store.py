@@ -25,8 +25,8 @@ Root attributes: ``format``/``format_version``, ``complete`` (false until the in
 finished), ``plan`` (:meth:`TilePlan.to_dict`), ``halo``, ``halo_is_default``, ``spacing``,
 ``spacing_estimate`` (how it was obtained), ``n_total``, ``tile_points``, ``tile_counts``,
 ``bounds``, ``chunk_rows``, ``attributes`` (name -> dtype and trailing shape),
-``attribute_max`` (name -> the largest value, integer attributes; since 2026-12-07), ``sample_size``,
-``seed``, ``ingest_parts``, ``part_starts`` and ``part_counts`` (below), ``config`` (the caller's
+``attribute_max`` (name -> the largest value, integer attributes; since 2026-12-07),
+``sample_size``, ``seed``, ``ingest_parts``, ``part_starts`` and ``part_counts`` (below), ``config`` (the caller's
 dict) and ``provenance`` (the caller's dict plus package,
 zarr and numpy versions and the UTC creation time).
 
