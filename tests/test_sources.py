@@ -428,3 +428,34 @@ def test_a_run_on_a_cloudcompare_text_export_keeps_colour_and_intensity(tmp_path
         for j, c in enumerate(("red", "green", "blue")):
             np.testing.assert_array_equal(cols[c], rgb[rows, j])
         np.testing.assert_array_equal(cols["Intensity"], inten[rows])
+
+
+def test_a_structured_npy_carries_its_fields(tmp_path):
+    """A structured NPY (our own points file, read back) carries its fields but the normals,
+    its colour as the LAS colour — so a PLY's colour survives PLY -> NPY -> PLY — and its old
+    flags are replaced by the new run's. Fields other than x, y, z were dropped."""
+    from tiledsimplify.cli import main
+    xyz, rgb, inten = _text_cloud(2000)
+    table = np.zeros(len(xyz), dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("red", "u1"),
+                                      ("green", "u1"), ("blue", "u1"), ("quality", "f4"),
+                                      ("sharp_edge", "u1"), ("nx", "f4")])
+    table["x"], table["y"], table["z"] = xyz.T
+    for j, c in enumerate(("red", "green", "blue")):
+        table[c] = rgb[:, j]
+    table["quality"] = inten
+    table["sharp_edge"] = 7
+    np.save(tmp_path / "in.npy", table)
+    _, _, attrs = next(iter(open_source(tmp_path / "in.npy").chunks()))
+    assert list(attrs) == ["red", "green", "blue", "quality", "sharp_edge"]
+    np.testing.assert_array_equal(attrs["red"], 257 * rgb[:, 0])
+    assert main(["run", str(tmp_path / "in.npy"), str(tmp_path / "out.npy"), "--ratio",
+                 "0.25", "-q"]) == 0
+    out = np.load(tmp_path / "out.npy")
+    assert out.dtype.names == ("x", "y", "z", "red", "green", "blue", "quality",
+                               "sharp_edge", "nx", "ny", "nz")
+    at = {tuple(p): i for i, p in enumerate(xyz.tolist())}
+    rows = np.array([at[tuple(p)] for p in np.c_[out["x"], out["y"], out["z"]].tolist()])
+    assert len(rows) == 500
+    for name in ("red", "green", "blue", "quality"):
+        np.testing.assert_array_equal(out[name], table[name][rows], err_msg=name)
+    assert set(np.unique(out["sharp_edge"])) <= {0, 1}  # the run's flags, not the old 7

@@ -655,6 +655,9 @@ def open_source(spec, chunk_points=1_000_000):
         arr = _load_npy(p)
         mapped = None
         if arr.dtype.names and {"x", "y", "z"} <= set(arr.dtype.names):  # our own output
+            names = arr.dtype.names
+            if ply_dimensions(names, {n: arr.dtype[n] for n in names}):  # fields: carried
+                return ColumnsSource(arr, chunk_points, files=[p])  # as a PLY's properties
             arr = np.stack([arr["x"], arr["y"], arr["z"]], axis=1)
         elif arr.dtype.names or arr.ndim != 2 or arr.shape[1] < 3 or arr.dtype.kind not in "fiu":
             arr = read_points(p)  # (n, >3) and the rest, or an error naming what it holds
