@@ -244,7 +244,7 @@ def test_colour_is_written_8_bit():
     assert np.array_equal(colour_8bit(257 * v), v) and np.array_equal(colour_8bit(256 * v), v)
     assert np.array_equal(colour_8bit(v, colour_max=255), v)
     assert np.array_equal(colour_8bit(np.array([65535, 300]), colour_max=65535), [255, 1])
-    attrs = {"red": 257 * v, "intensity": np.arange(6, dtype=np.uint16),
+    attrs = {"red": (257 * v).astype(np.uint16), "intensity": np.arange(6, dtype=np.uint16),
              "flag": np.ones(6, dtype=bool), "rgb": np.zeros((6, 3), dtype=np.uint16),
              "sharp_edge": np.ones(6, dtype=np.uint8), "odd name": np.zeros(6, dtype=np.int32)}
     cols = attribute_columns(attrs, reserved={"sharp_edge"})
@@ -254,6 +254,10 @@ def test_colour_is_written_8_bit():
                                           "rgb_2", "odd_name"]
     assert all(cols[k].dtype == dtypes[k] and cols[k].shape == (6,) for k in cols)
     assert np.array_equal(cols["red"], v) and dtypes["flag"] == np.uint8
+    # a lone float "red" (a PLY property, not the LAS colour) is written as it is
+    lone = {"red": np.array([0.25, 0.5], dtype=np.float32)}
+    assert attribute_columns(lone)["red"].dtype == np.float32
+    assert attribute_dtypes({"red": (np.dtype(np.float32), ())}) == {"red": np.float32}
 
 
 def _rows_of(xyz, X):

@@ -58,6 +58,12 @@ COLOURS = ("red", "green", "blue")
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]")
 
 
+def _is_colour(name, dtype):
+    """A LAS colour dimension as the store and the sources carry it: 16-bit ``red``,
+    ``green`` or ``blue`` (a lone ``red`` of another type, a PLY's, is written as it is)."""
+    return name in COLOURS and np.dtype(dtype) == np.uint16
+
+
 def colour_8bit(values, colour_max=None):
     """16-bit LAS colour as 8 bits: ``v >> 8``, so 8-bit colour read as 257 v (a PLY's, an
     E57's) or written as 256 v (many LAS writers) comes back as v. Where no colour value of
@@ -86,7 +92,7 @@ def attribute_dtypes(spec, reserved=()):
     for name, (dtype, trail) in spec.items():
         if name in reserved or name in ("x", "y", "z"):
             continue
-        dt = np.dtype(np.uint8) if name in COLOURS or np.dtype(dtype) == bool \
+        dt = np.dtype(np.uint8) if _is_colour(name, dtype) or np.dtype(dtype) == bool \
             else np.dtype(dtype)
         for col in _attribute_names(name, trail):
             out[col] = dt
@@ -103,7 +109,7 @@ def attribute_columns(attrs, colour_max=None, reserved=()):
         if name in reserved or name in ("x", "y", "z"):
             continue
         v = np.asarray(values)
-        if name in COLOURS:
+        if _is_colour(name, v.dtype):
             v = colour_8bit(v, colour_max)
         elif v.dtype == bool:
             v = v.astype(np.uint8)
