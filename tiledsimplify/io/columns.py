@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import FileFormatError
 from .las import LasSource
 from .mesh import _PLY_TYPES, _parse_ply_header, read_points
-from .sources import TEXT_SUFFIXES, _text_header
+from .sources import TEXT_SUFFIXES, _split_line, _text_header
 
 _XYZ = ("x", "y", "z")
 
@@ -82,12 +82,9 @@ def read_columns(path):
             return _split({name: arr[name] for name in arr.dtype.names})
         return read_points(path), {}
     if suffix in TEXT_SUFFIXES:
-        skip, delimiter, _, _ = _text_header(path)
-        if skip:  # the header is the line before the first point (after any comments)
-            with open(path, encoding="ascii", errors="replace") as fh:
-                for _ in range(skip):
-                    line = fh.readline()
-            names = line.replace(",", " ").replace(";", " ").replace('"', " ").split()
+        skip, delimiter, header, _ = _text_header(path)
+        if header is not None:  # the line before the first point (after any comments)
+            names = _split_line(header)
             if set(_XYZ) <= set(names):
                 table = np.loadtxt(path, delimiter=delimiter, skiprows=skip, ndmin=2)
                 if table.shape[1] == len(names):

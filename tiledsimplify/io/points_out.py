@@ -58,6 +58,13 @@ COLOURS = ("red", "green", "blue")
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]")
 
 
+def safe_name(name):
+    """``name`` as a column or store key takes it: letters, digits, ``_ . -`` (others become
+    ``_``), starting with a letter, digit or ``_``; None if it cannot."""
+    name = _UNSAFE.sub("_", str(name))
+    return name if name[:1].isalnum() or name[:1] == "_" else None
+
+
 def _is_colour(name, dtype):
     """A LAS colour dimension as the store and the sources carry it: 16-bit ``red``,
     ``green`` or ``blue`` (a lone ``red`` of another type, a PLY's, is written as it is)."""
@@ -78,7 +85,7 @@ def colour_8bit(values, colour_max=None):
 def _attribute_names(name, trail):
     """The columns of one attribute: its name (letters, digits, ``_ . -``: a PLY property
     or a header word), one per element (``name_0``...) if it has a trailing shape."""
-    name = _UNSAFE.sub("_", str(name))
+    name = safe_name(name) or "_"
     size = int(np.prod(tuple(trail), dtype=np.int64))
     return [name] if not tuple(trail) else [f"{name}_{i}" for i in range(size)]
 
@@ -88,15 +95,9 @@ def attribute_dtypes(spec, reserved=()):
     given as ``{name: (dtype, trailing shape)}``: the columns :func:`attribute_columns` makes.
     Attributes named in ``reserved`` (x, y, z, the simplifier's own columns: an input
     simplified before carries its old ones) are left out; bool becomes uint8."""
-    out = {}
-    for name, (dtype, trail) in spec.items():
-        if name in reserved or name in ("x", "y", "z"):
-            continue
-        dt = np.dtype(np.uint8) if _is_colour(name, dtype) or np.dtype(dtype) == bool \
-            else np.dtype(dtype)
-        for col in _attribute_names(name, trail):
-            out[col] = dt
-    return out
+    empty = {name: np.empty((0,) + tuple(trail), dtype=dtype)
+             for name, (dtype, trail) in spec.items()}
+    return {col: v.dtype for col, v in attribute_columns(empty, reserved=reserved).items()}
 
 
 def attribute_columns(attrs, colour_max=None, reserved=()):
@@ -114,7 +115,7 @@ def attribute_columns(attrs, colour_max=None, reserved=()):
         elif v.dtype == bool:
             v = v.astype(np.uint8)
         cols = _attribute_names(name, v.shape[1:])
-        flat = v.reshape(len(v), -1) if v.ndim > 1 else v[:, None]
+        flat = v.reshape(len(v), len(cols))
         for i, col in enumerate(cols):
             out[col] = flat[:, i]
     return out

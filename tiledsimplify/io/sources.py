@@ -9,7 +9,6 @@ Compressed (``.gz``) point files and meshes (OBJ/OFF/STL) are read whole.
 
 import io
 import itertools
-import re
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +17,7 @@ from ..core.bounds import finite_rows
 from ..errors import FileFormatError, InputError
 from .las import LasSource, las_files, part_ranges
 from .mesh import _PLY_TYPES, _parse_ply_header, read_ply_vertices, read_points
+from .points_out import safe_name
 
 TEXT_SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".asc")
 #: PLY vertex properties read as the LAS colour dimensions (all three, or none)
@@ -40,27 +40,36 @@ def ply_colours(names):
 #: PLY vertex properties a source does not carry: the position, and normals (the
 #: simplifier's own replace them in every output)
 PLY_SKIP = frozenset({"x", "y", "z", "nx", "ny", "nz"})
-_UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]")
+
+
+def _named(names, skip, seen):
+    """``(index, dimension)`` for every name of ``names`` whose index is not in ``skip`` nor
+    its lower case in :data:`PLY_SKIP`, the dimension its :func:`~.points_out.safe_name`; a
+    name that has none, or one of ``seen`` (dimensions already taken) or of a name before it,
+    is left out."""
+    seen = set(seen)
+    out = []
+    for i, name in enumerate(names):
+        dim = safe_name(name)
+        if i in skip or name.lower() in PLY_SKIP or dim is None or dim in seen:
+            continue
+        seen.add(dim)
+        out.append((i, dim))
+    return out
 
 
 def ply_dimensions(names, codes):
-    """What a PLY vertex with properties ``names`` (numpy types ``codes``) carries:
+    """What a PLY vertex with properties ``names`` (numpy types ``codes``: a mapping, or the
+    structured dtype of its records) carries:
     ``[(dimension, property, code, is_colour)]`` — its colour as the LAS colour dimensions
     (:func:`ply_colours`, 16-bit: :func:`colour_uint16`), every other property but
     :data:`PLY_SKIP` under its own name (letters, digits, ``_ . -``) and type, as a scan's
     ``confidence`` and ``intensity`` (the Stanford Bunny's)."""
     found = ply_colours(names)
     out = [(las, name, codes[name], True) for las, name in found.items()]
-    taken = {las for las in found}
-    for name in names:
-        if name in PLY_SKIP or name in found.values():
-            continue
-        dim = _UNSAFE.sub("_", name)
-        if dim in taken or not dim[:1].isalnum() and dim[:1] != "_":
-            continue  # a name two properties would share, or not one a store key takes
-        taken.add(dim)
-        out.append((dim, name, codes[name], False))
-    return out
+    colour = {names.index(name) for name in found.values()}
+    return out + [(dim, names[i], codes[names[i]], False)
+                  for i, dim in _named(names, colour, found)]
 
 
 def ply_values(values, code, is_colour):
@@ -195,7 +204,7 @@ class ColumnsSource(ArraySource):
     def _attrs(arr, start, stop):
         """The dimensions a PLY vertex carries (:func:`ply_dimensions`): colour as the LAS
         colour, the other properties as they are."""
-        dims = ply_dimensions(arr.dtype.names, {n: arr.dtype[n] for n in arr.dtype.names})
+        dims = ply_dimensions(arr.dtype.names, arr.dtype)
         part = arr[start:stop] if dims else None
         return {dim: ply_values(part[name], code, colour)
                 for dim, name, code, colour in dims}
@@ -538,15 +547,8 @@ def text_columns(header, data):
             dims += [(c, las, code, True) for c, las in zip(cols, scheme.values())]
             taken.update(cols)
             break
-    seen = {d for _, d, _, _ in dims}
-    for col, name in enumerate(names):
-        if col in xyz or col in taken or lower[col] in ("nx", "ny", "nz"):
-            continue
-        dim = _UNSAFE.sub("_", name)
-        if dim in seen or not (dim[:1].isalnum() or dim[:1] == "_"):
-            continue
-        seen.add(dim)
-        dims.append((col, dim, "f8", False))
+    dims += [(col, dim, "f8", False)
+             for col, dim in _named(names, taken | set(xyz), [d for _, d, _, _ in dims])]
     return xyz, tuple(dims) or None
 
 
@@ -643,7 +645,7 @@ def open_source(spec, chunk_points=1_000_000):
             return src
     if ply:  # gzipped, or a layout the chunked readers do not take: read whole
         table = read_ply_vertices(p)
-        if ply_dimensions(table.dtype.names, {n: table.dtype[n] for n in table.dtype.names}):
+        if ply_dimensions(table.dtype.names, table.dtype):
             return ColumnsSource(table, chunk_points, files=[p])
         return ArraySource(np.stack([table[a] for a in "xyz"], axis=1).astype(np.float64),
                            chunk_points, files=[p])
@@ -655,8 +657,7 @@ def open_source(spec, chunk_points=1_000_000):
         arr = _load_npy(p)
         mapped = None
         if arr.dtype.names and {"x", "y", "z"} <= set(arr.dtype.names):  # our own output
-            names = arr.dtype.names
-            if ply_dimensions(names, {n: arr.dtype[n] for n in names}):  # fields: carried
+            if ply_dimensions(arr.dtype.names, arr.dtype):  # fields: carried
                 return ColumnsSource(arr, chunk_points, files=[p])  # as a PLY's properties
             arr = np.stack([arr["x"], arr["y"], arr["z"]], axis=1)
         elif arr.dtype.names or arr.ndim != 2 or arr.shape[1] < 3 or arr.dtype.kind not in "fiu":
