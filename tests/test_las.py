@@ -828,3 +828,35 @@ def test_folder_reads_every_laz(tmp_path):
     assert ends[0] == (0, COUNTS[AUTZEN])
     assert ends[1][0] == COUNTS[AUTZEN]
     assert ends[-1][0] + ends[-1][1] == src.count
+
+
+def test_a_non_las_inputs_dimensions_find_a_place_in_a_las_output():
+    """:func:`carried_layout`: every numeric dimension of a non-LAS input has a place in a LAS
+    output — a standard dimension where it holds integers (or the standard one is a float),
+    else extra bytes of its own type under its own name, or with its type added where that
+    name is taken in any case; LAS's types for bool and float16; one per element of a trailing
+    shape; names cut to LAS's 32 bytes and kept apart; the simplifier's own left out."""
+    from tiledsimplify.io.las import carried_layout
+    attrs = {"intensity": ("f4", ()), "classification": ("u1", ()), "red": ("u2", ()),
+             "gps_time": ("f8", ()), "user_data": ("f8", ()), "Intensity": ("i4", ()),
+             "confidence": ("f4", ()), "flag": ("?", ()), "half": ("f2", ()),
+             "normal_guess": ("f8", (3,)), "sharp_edge": ("u1", ()), "label": ("U4", ()),
+             "a" * 40: ("i2", ()), "a" * 35: ("u4", ())}
+    params, plan = carried_layout(attrs, laspy.PointFormat(7), reserved={"sharp_edge"})
+    types = {p.name: np.dtype(p.type) for p in params}
+    assert types == {
+        "intensity_float32": np.float32, "user_data_float64": np.float64,
+        "Intensity_int32": np.int32, "confidence": np.float32, "flag": np.uint8,
+        "half": np.float32, "normal_guess_0": np.float64, "normal_guess_1": np.float64,
+        "normal_guess_2": np.float64, "a" * 32: np.int16, "a" * 30 + "_1": np.uint32}
+    assert plan == {
+        "intensity_float32": ("intensity", None), "classification": ("classification", None),
+        "red": ("red", None), "gps_time": ("gps_time", None),
+        "user_data_float64": ("user_data", None), "Intensity_int32": ("Intensity", None),
+        "confidence": ("confidence", None), "flag": ("flag", None), "half": ("half", None),
+        "normal_guess_0": ("normal_guess", 0), "normal_guess_1": ("normal_guess", 1),
+        "normal_guess_2": ("normal_guess", 2), "a" * 32: ("a" * 40, None),
+        "a" * 30 + "_1": ("a" * 35, None)}
+    header = laspy.LasHeader(point_format=7, version="1.4")
+    header.add_extra_dims(params)  # LAS takes them all
+    assert set(plan) <= set(header.point_format.dimension_names)

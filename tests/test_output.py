@@ -364,8 +364,7 @@ def _ply_with_properties(path, fmt, n=5000, seed=4):
 def test_a_ply_keeps_every_vertex_property(tmp_path, fmt):
     """A PLY's vertex properties, not only its colour, come through `run` and `simplify` to a
     points file with their own names, types and values; its normals are replaced by the
-    simplifier's (one nx column), and a LAS output takes its integer properties that are LAS
-    dimensions (none here) but not a float one."""
+    simplifier's (one nx column)."""
     from tiledsimplify.cli import main
     from tiledsimplify.io.columns import read_columns
     path = tmp_path / "props.ply"
@@ -390,8 +389,10 @@ def test_a_ply_keeps_every_vertex_property(tmp_path, fmt):
 
 def test_the_bunnys_confidence_and_intensity_come_through(data_dir, tmp_path):
     """The Stanford Bunny (a gzipped ASCII PLY mesh, read whole) keeps its vertices'
-    ``confidence`` and ``intensity`` in a points file; its float intensity (0..1) is not cast
-    into a LAS output's 16-bit intensity (0 there, as before)."""
+    ``confidence`` and ``intensity`` in a points file and in a LAS output, as extra bytes of
+    their own type there: the float intensity (0..1) is not cast into LAS's 16-bit intensity
+    (0 there, as before) but kept beside it as ``intensity_float32``. The LAS output had
+    neither."""
     laspy = pytest.importorskip("laspy")
     from tiledsimplify.cli import main
     from tiledsimplify.io.mesh import read_ply_vertices
@@ -409,4 +410,13 @@ def test_the_bunnys_confidence_and_intensity_come_through(data_dir, tmp_path):
     for name in ("confidence", "intensity"):
         np.testing.assert_array_equal(cols[name], v[name][rows])
     assert main(["run", str(src), str(tmp_path / "b.laz"), "--ratio", "0.1", "-q"]) == 0
-    assert not laspy.read(tmp_path / "b.laz").intensity.any()
+    las = laspy.read(tmp_path / "b.laz")
+    assert not las.intensity.any()
+    assert list(las.point_format.extra_dimension_names) == [
+        "confidence", "intensity_float32", "sharp_edge", "importance", "simplify_rank"]
+    from scipy.spatial import cKDTree
+    d, rows = cKDTree(X).query(np.c_[las.x, las.y, las.z])  # quantised to the LAS grid
+    assert d.max() < float(np.linalg.norm(las.header.scales)) and len(np.unique(rows)) == 3595
+    for name, got in (("confidence", "confidence"), ("intensity", "intensity_float32")):
+        assert las[got].dtype == np.float32
+        np.testing.assert_array_equal(las[got], v[name][rows])

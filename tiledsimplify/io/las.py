@@ -820,6 +820,71 @@ def new_header(lo, hi, spacing, colour=False) -> laspy.LasHeader:
     return header
 
 
+#: LAS's extra-bytes name field, in bytes
+_NAME_BYTES = 32
+
+
+def _free_name(name, taken):
+    """``name`` cut to the LAS name field, with a number added until no name in ``taken``
+    (lower case: PDAL's dimension names ignore case) is the same."""
+    base = name.encode("utf-8")[:_NAME_BYTES].decode("utf-8", "ignore")
+    out, i = base, 1
+    while out.lower() in taken:
+        tail = f"_{i}"
+        out = base.encode("utf-8")[:_NAME_BYTES - len(tail)].decode("utf-8", "ignore") + tail
+        i += 1
+    return out
+
+
+def carried_layout(attributes, point_format, reserved=()):
+    """Where a LAS output of a non-LAS input puts each dimension the input carried
+    (``attributes``: name -> ``(dtype, trailing shape)``, PLY properties, text columns, E57
+    intensity and colour), nothing dropped.
+
+    A dimension named as one of ``point_format``'s standard dimensions goes there if it holds
+    integers (or bools), or the standard one is a float (``gps_time``). Every other becomes an
+    extra-bytes dimension of its own type (bool as uint8, float16 as float32), one per element
+    of a trailing shape (``name_0``...), under its own name, or with its type added where that
+    name is taken in any case (PDAL ignores case): the Bunny PLY's float ``intensity`` (0..1)
+    is kept as ``intensity_float32``, LAS's 16-bit ``intensity`` left 0; a number is added if
+    that is taken too. Names in ``reserved`` are left out (the simplifier's own dimensions,
+    which the output adds anew).
+
+    Returns
+    -------
+    (list of laspy.ExtraBytesParams, dict)
+        The extra-bytes dimensions to add to the header, and for each dimension filled from
+        the input, ``{output name: (input name, element index or None)}``.
+    """
+    standard = {d.name: np.dtype(d.dtype) if d.dtype is not None else np.dtype(np.uint8)
+                for d in point_format.dimensions if d.name not in _XYZ}
+    taken = {n.lower() for n in list(standard) + list(_XYZ) + [d[0] for d in SIMPLIFY_DIMS]}
+    params, plan = [], {}
+    for name, (dtype, trail) in attributes.items():
+        dtype, trail = np.dtype(dtype), tuple(trail)
+        if name in reserved or name in ("x", "y", "z"):
+            continue
+        if name in standard and not trail and (dtype.kind in "biu"
+                                               or standard[name].kind == dtype.kind == "f"):
+            plan[name] = (name, None)
+            continue
+        if dtype.kind not in "biuf":
+            continue  # not a number: no LAS type holds it
+        kind = np.dtype(np.uint8) if dtype.kind == "b" else dtype
+        if kind.kind == "f":  # LAS holds float32 and float64
+            kind = np.dtype(np.float32 if kind.itemsize <= 4 else np.float64)
+        label = name if name.lower() not in taken else f"{name}_{dtype.name}"
+        size = int(np.prod(trail, dtype=np.int64))
+        for i in range(size) if trail else (None,):
+            out = _free_name(label if i is None else f"{label}_{i}", taken)
+            taken.add(out.lower())
+            params.append(laspy.ExtraBytesParams(
+                name=out, type=kind.newbyteorder("<"),
+                description=_short(f"input {name}" + ("" if i is None else f"[{i}]"), 32)))
+            plan[out] = (name, i)
+    return params, plan
+
+
 def _as_params(dim) -> laspy.ExtraBytesParams:
     if isinstance(dim, laspy.ExtraBytesParams):
         return dim

@@ -41,6 +41,22 @@ def carried(ts):
     return attribute_dtypes(spec, RESERVED), colour
 
 
+def new_las_header(ts):
+    """A LAS output of a non-LAS input: its header (:func:`.las.new_header`, with an
+    extra-bytes dimension for each dimension the input carried that point format 6 or 7 has
+    none for) and where each dimension is filled from (:func:`.las.carried_layout`)."""
+    from ..io.las import carried_layout, new_header
+    lo, hi = ts.root_attrs["bounds"]
+    header = new_header(lo, hi, ts.spacing,
+                        colour=all(c in ts.attribute_names for c in COLOURS))
+    spec = {name: (np.dtype(v["dtype"]), tuple(v["shape"]))
+            for name, v in ts.root_attrs["attributes"].items()}
+    params, plan = carried_layout(spec, header.point_format, RESERVED)
+    if params:
+        header.add_extra_dims(params)
+    return header, plan
+
+
 def _keep(ts, tile, prefix, refined):
     return ts.read_refined(tile)[0] if refined else kept_in_tile(ts, tile, prefix)
 
@@ -49,11 +65,12 @@ def _kept(ts, tile, prefix, refined):
     return _keep(ts, tile, prefix, refined), ts.read_result(tile, "boundary")
 
 
-def _tile_piece(store_path, tile, prefix, refined, layout, is_las, start=None, expect=None):
+def _tile_piece(store_path, tile, prefix, refined, layout, plan, start=None, expect=None):
     """What a LAS/LAZ output takes from one tile: ``(piece, boundary count)`` — its kept core
     points packed as the output's point records (:meth:`.LasLayout.pack`: quantised, checked,
-    with the three added dimensions; a non-LAS input's points get the dimensions it carried,
-    else :data:`~tiledsimplify.io.las.NEW_POINT_DEFAULTS`) — or None if it keeps none. Made
+    with the three added dimensions; a LAS input's records as read, a non-LAS input's points
+    (``plan`` not None: :func:`new_las_header`'s) the dimensions it carried, the rest
+    :data:`~tiledsimplify.io.las.NEW_POINT_DEFAULTS`) — or None if it keeps none. Made
     wherever this runs: on a cluster, a worker. With ``start``, the file's point where the
     tile's first kept point goes (a LAZ output on a cluster, :func:`_write_laz_chunks`), the
     piece is cut at the file's chunk boundaries and its whole chunks compressed
@@ -70,16 +87,19 @@ def _tile_piece(store_path, tile, prefix, refined, layout, is_las, start=None, e
     xyz = ts.core_xyz(tile)[keep]
     boundary = boundary[keep]
     k = len(xyz)
-    if is_las:
+    if plan is None:
         attrs = {name: values[keep] for name, values in ts.attrs(tile).items()}
-    else:  # a new LAS 1.4 layout: the dimensions the input carried (E57 intensity, colour),
-        # integers only: a PLY's float intensity (0..1, the Bunny's) would round to 0 or 1
-        kinds = ts.attribute_dtypes
-        stored = ts.attrs(tile, [name for name in layout.attribute_names
-                                 if name in kinds and kinds[name].kind in "iu"])
-        attrs = {name: stored[name][keep] if name in stored
-                 else np.full(k, NEW_POINT_DEFAULTS.get(name, 0))
-                 for name in layout.attribute_names}
+    else:  # a new LAS 1.4 layout: the dimensions the input carried (E57 intensity, colour,
+        # PLY properties, text columns), each where the plan puts it
+        stored = ts.attrs(tile, sorted({name for name, _ in plan.values()}))
+        attrs = {}
+        for name in layout.attribute_names:
+            if name not in plan:
+                attrs[name] = np.full(k, NEW_POINT_DEFAULTS.get(name, 0))
+                continue
+            source, element = plan[name]
+            values = stored[source][keep]
+            attrs[name] = values if element is None else values.reshape(k, -1)[:, element]
     piece = layout.pack(xyz, attrs, {"sharp_edge": boundary.astype(np.uint8),
                                      "importance": np.full(k, np.nan),
                                      "simplify_rank": np.full(k, -1, dtype=np.int64)})
@@ -139,19 +159,17 @@ def write_output(ts, source, output, prefix, refined=False, client=None):
     counts = [ts.count(t) - int(prefix[t]) for t in range(ts.n_tiles)]
     written = Written(sum(counts))
     if output.suffix.lower() in LAS_SUFFIXES:
-        from ..io.las import LasOutput, new_header
+        from ..io.las import LasOutput
         if source.is_las:
-            template = source.template_header()
+            template, plan = source.template_header(), None
         else:  # a new LAS 1.4 layout: the input had no point records to keep
-            lo, hi = ts.root_attrs["bounds"]
-            template = new_header(lo, hi, ts.spacing, colour=all(
-                c in ts.attribute_names for c in ("red", "green", "blue")))
+            template, plan = new_las_header(ts)
         with LasOutput(output, template) as out:
             if client is not None and output.suffix.lower() == ".laz":
-                return _write_laz_chunks(ts, out, prefix, refined, source.is_las, client,
-                                         counts, written)
+                return _write_laz_chunks(ts, out, prefix, refined, plan, client, counts,
+                                         written)
             for got in _in_tile_order(
-                    _tile_piece, lambda i: (path, i, prefix, refined, out.layout, source.is_las),
+                    _tile_piece, lambda i: (path, i, prefix, refined, out.layout, plan),
                     ts.n_tiles, client):
                 if got is None:
                     continue
@@ -183,7 +201,7 @@ def write_output(ts, source, output, prefix, refined=False, client=None):
     return n_out, n_boundary
 
 
-def _write_laz_chunks(ts, out, prefix, refined, is_las, client, counts, written):
+def _write_laz_chunks(ts, out, prefix, refined, plan, client, counts, written):
     """A LAZ output on a cluster, compressed by its workers: each tile's kept points
     (``counts``) are packed and cut at the file's chunk boundaries there (:func:`_tile_piece`
     with the file's point where they start), its whole chunks compressed; each chunk that
@@ -204,7 +222,7 @@ def _write_laz_chunks(ts, out, prefix, refined, is_las, client, counts, written)
         while made[0] < min(upto, n):
             t = made[0]
             pieces[t] = client.submit(_tile_piece, path, t, prefix, refined, out.layout,
-                                      is_las, int(starts[t]), counts[t], pure=False)
+                                      plan, int(starts[t]), counts[t], pure=False)
             bodies[t] = client.submit(_piece_part, pieces[t], "body", pure=False)
             made[0] += 1
         while made[1] < len(straddling) and span[straddling[made[1]]].stop <= made[0]:
