@@ -486,6 +486,11 @@ def test_ingest_in_parts_holds_what_one_ingest_holds(tmp_path, n_total):
     # the largest value of each integer attribute, over every part (a points file's colour)
     want = {k: int(v.max()) for k, v in attrs.items() if v.dtype.kind in "iu"}
     assert whole.attribute_max == split.attribute_max == want and "gps_time" not in want
+    # a store made before the ingest recorded them (a run resumed): read from its tiles
+    root = zarr.open_group(tmp_path / "whole", mode="r+")
+    del root.attrs["attribute_max"]
+    old = TileStore.open(tmp_path / "whole")
+    assert "attribute_max" not in old.root_attrs and old.attribute_max == want
     a = split.root_attrs
     assert a["ingest_parts"] == 4 and len(a["part_starts"]) == 4
     assert np.array_equal(np.sum(a["part_counts"], axis=0), split.tile_counts)

@@ -532,9 +532,20 @@ class TileStore:
 
     @property
     def attribute_max(self) -> dict[str, int]:
-        """The largest value of each integer attribute in the input ({} for a store made
-        before 2026-12-07)."""
-        return {k: int(v) for k, v in self._attrs.get("attribute_max", {}).items()}
+        """The largest value of each integer attribute in the input: recorded by the ingest
+        (since 2026-12-07); for a store made before (a run resumed), worked out once from the
+        tiles' core points (every input point once) — without it a resumed run's 8-bit colour
+        in 16-bit fields would be written ``v >> 8``."""
+        if "attribute_max" not in self._attrs:
+            names = [n for n, d in self.attribute_dtypes.items() if d.kind in "iu"]
+            top: dict[str, int] = {}
+            for t in range(self.n_tiles if names else 0):
+                for name, values in self.attrs(t, names).items():
+                    if values.size:
+                        v = int(values.max())
+                        top[name] = max(v, top.get(name, v))
+            self._attrs["attribute_max"] = top
+        return {k: int(v) for k, v in self._attrs["attribute_max"].items()}
 
     @property
     def root_attrs(self) -> dict:
