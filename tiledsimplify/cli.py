@@ -208,7 +208,9 @@ def _parser():
                     "sharp_edge, nx, ny, nz.")
     r.add_argument("input", help="LAS/LAZ file, folder or glob of LAS/LAZ tiles; E57 file, "
                                  "folder or glob; or PLY, XYZ/CSV/TXT, NPY")
-    r.add_argument("output", help="output .las/.laz (LAS input), .ply, .npy, .xyz or .csv")
+    r.add_argument("output", help="output .las/.laz (of a non-LAS input: LAS 1.4 point "
+                   "format 6, or 7 with colour, its other dimensions as extra bytes), .ply, "
+                   ".npy, .xyz or .csv")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--ratio", type=_ratio, help="fraction of points to keep, in (0, 1]")
     g.add_argument("--count", type=_count, help="number of points to keep")
