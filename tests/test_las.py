@@ -1,4 +1,5 @@
-"""Tests for tiledsimplify.io.las: LAS/LAZ files, chunked reading, streaming LasOutput."""
+"""Tests for tiledsimplify.io.las and .las_output: LAS/LAZ files, chunked reading, streaming
+LasOutput."""
 
 from __future__ import annotations
 
@@ -16,9 +17,8 @@ laspy = pytest.importorskip("laspy")
 from laspy.vlrs.vlrlist import VLRList  # noqa: E402
 
 from tiledsimplify.errors import FileFormatError, InputError  # noqa: E402
-from tiledsimplify.io.las import (  # noqa: E402
-    SIMPLIFY_DIMS, LasOutput, LasSource, las_files, write_las,
-)
+from tiledsimplify.io.las import LasSource, las_files  # noqa: E402
+from tiledsimplify.io.las_output import SIMPLIFY_DIMS, LasOutput, write_las  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 LIDAR = DATA / "lidar"
@@ -836,7 +836,7 @@ def test_a_non_las_inputs_dimensions_find_a_place_in_a_las_output():
     else extra bytes of its own type under its own name, or with its type added where that
     name is taken in any case; LAS's types for bool and float16; one per element of a trailing
     shape; names cut to LAS's 32 bytes and kept apart; the simplifier's own left out."""
-    from tiledsimplify.io.las import carried_layout
+    from tiledsimplify.io.las_output import carried_layout
     attrs = {"intensity": ("f4", ()), "classification": ("u1", ()), "red": ("u2", ()),
              "gps_time": ("f8", ()), "user_data": ("f8", ()), "Intensity": ("i4", ()),
              "confidence": ("f4", ()), "flag": ("?", ()), "half": ("f2", ()),

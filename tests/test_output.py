@@ -78,7 +78,7 @@ def test_outputs_get_the_permissions_of_a_new_file(tmp_path, suffix):
         if suffix in LAS_SUFFIXES:
             import laspy
 
-            from tiledsimplify.io.las import write_las
+            from tiledsimplify.io.las_output import write_las
             header = laspy.LasHeader(point_format=0, version="1.2")
             header.scales, header.offsets = [1e-6] * 3, [0.0] * 3
             dims = [d for d in header.point_format.dimension_names if d not in ("X", "Y", "Z")]
@@ -102,7 +102,7 @@ def test_a_full_disk_names_the_output(tmp_path, monkeypatch, caplog):
 
     from tiledsimplify.cli import EXIT_ERROR, main
     from tiledsimplify.errors import FileFormatError
-    from tiledsimplify.io.las import write_las
+    from tiledsimplify.io.las_output import write_las
 
     def short(*args, **kwargs):
         raise OSError("17974 requested and 248 written")

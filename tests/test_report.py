@@ -203,7 +203,7 @@ def test_report_into_a_file_is_refused(tmp_path, caplog):
 def test_read_columns_las_extra_dimensions(tmp_path):
     import laspy
 
-    from tiledsimplify.io.las import write_las
+    from tiledsimplify.io.las_output import write_las
     header = laspy.LasHeader(point_format=0, version="1.2")
     header.scales = np.array([0.001] * 3)
     header.offsets = np.zeros(3)

@@ -9,7 +9,7 @@ and :meth:`LasLayout.chunked` cuts a piece at the file's LASzip chunk boundaries
 ``chunk_size`` points from the file's first, 50,000 as laspy writes them) and compresses the
 whole chunks it holds; the records before its first boundary and from its last on go into the
 chunks that straddle two pieces, compressed by :meth:`LasLayout.compress` from the parts of
-consecutive pieces. :class:`ChunkWriter`, the LAZ point writer :class:`.las.LasOutput` gives
+consecutive pieces. :class:`ChunkWriter`, the LAZ point writer :class:`.las_output.LasOutput` gives
 ``laspy.LasWriter``, then only appends compressed chunks and writes the chunk table; the
 header grows by each piece's summary (:func:`grow_header`). So on a cluster the workers pack
 and compress and the client writes bytes (:func:`tiledsimplify.pipeline.output.write_output`);
@@ -125,7 +125,7 @@ class LasLayout:
         return compress_chunks(self.vlr(), b"".join(parts), self.header.point_format.size)
 
     def pack(self, xyz, attrs=None, extra=None) -> LasPiece:
-        """Points as a :class:`LasPiece` (see :meth:`.las.LasOutput.write` for the arguments
+        """Points as a :class:`LasPiece` (see :meth:`.las_output.LasOutput.write` for the arguments
         and the errors raised)."""
         path = self.path
         xyz = np.asarray(xyz, dtype=np.float64)
@@ -252,7 +252,7 @@ def compress_chunks(vlr, raw, size, parallel=False) -> tuple[bytes, list]:
 
 
 class ChunkWriter:
-    """The LAZ point writer of :class:`.las.LasOutput`: laspy's point-writer interface
+    """The LAZ point writer of :class:`.las_output.LasOutput`: laspy's point-writer interface
     (``laspy._pointwriter.IPointWriter``), handed to ``laspy.LasWriter`` as its LAZ backend
     (:class:`ChunkBackend`), so laspy still writes and updates the header, VLRs and EVLRs.
 

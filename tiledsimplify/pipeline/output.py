@@ -26,7 +26,8 @@ log = logging.getLogger("tiledsimplify")
 OUTPUT_COLUMNS = {"sharp_edge": np.uint8, "nx": NORMAL_DTYPE, "ny": NORMAL_DTYPE,
                   "nz": NORMAL_DTYPE}
 #: dimensions of the input a non-LAS output leaves out: its own columns, and the ones an
-#: input simplified before carries from that run (:data:`~tiledsimplify.io.las.SIMPLIFY_DIMS`)
+#: input simplified before carries from that run
+#: (:data:`~tiledsimplify.io.las_output.SIMPLIFY_DIMS`)
 RESERVED = frozenset(OUTPUT_COLUMNS) | {"importance", "simplify_rank"}
 
 
@@ -42,10 +43,10 @@ def carried(ts):
 
 
 def new_las_header(ts):
-    """A LAS output of a non-LAS input: its header (:func:`.las.new_header`, with an
+    """A LAS output of a non-LAS input: its header (:func:`.las_output.new_header`, with an
     extra-bytes dimension for each dimension the input carried that point format 6 or 7 has
-    none for) and where each dimension is filled from (:func:`.las.carried_layout`)."""
-    from ..io.las import carried_layout, new_header
+    none for) and where each dimension is filled from (:func:`.las_output.carried_layout`)."""
+    from ..io.las_output import carried_layout, new_header
     lo, hi = ts.root_attrs["bounds"]
     header = new_header(lo, hi, ts.spacing,
                         colour=all(c in ts.attribute_names for c in COLOURS))
@@ -70,12 +71,12 @@ def _tile_piece(store_path, tile, prefix, refined, layout, plan, start=None, exp
     points packed as the output's point records (:meth:`.LasLayout.pack`: quantised, checked,
     with the three added dimensions; a LAS input's records as read, a non-LAS input's points
     (``plan`` not None: :func:`new_las_header`'s) the dimensions it carried, the rest
-    :data:`~tiledsimplify.io.las.NEW_POINT_DEFAULTS`) — or None if it keeps none. Made
+    :data:`~tiledsimplify.io.las_output.NEW_POINT_DEFAULTS`) — or None if it keeps none. Made
     wherever this runs: on a cluster, a worker. With ``start``, the file's point where the
     tile's first kept point goes (a LAZ output on a cluster, :func:`_write_laz_chunks`), the
     piece is cut at the file's chunk boundaries and its whole chunks compressed
     (:meth:`.LasLayout.chunked`); it must then keep ``expect`` points."""
-    from ..io.las import NEW_POINT_DEFAULTS
+    from ..io.las_output import NEW_POINT_DEFAULTS
     ts = TileStore.open(store_path)
     keep, boundary = _kept(ts, tile, prefix, refined)
     if expect is not None and int(keep.sum()) != expect:
@@ -159,7 +160,7 @@ def write_output(ts, source, output, prefix, refined=False, client=None):
     counts = [ts.count(t) - int(prefix[t]) for t in range(ts.n_tiles)]
     written = Written(sum(counts))
     if output.suffix.lower() in LAS_SUFFIXES:
-        from ..io.las import LasOutput
+        from ..io.las_output import LasOutput
         if source.is_las:
             template, plan = source.template_header(), None
         else:  # a new LAS 1.4 layout: the input had no point records to keep

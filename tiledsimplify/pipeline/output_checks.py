@@ -89,9 +89,9 @@ def warn_regrid(output, source):
 def check_layout(output, source):
     """Refuse now, not after the work, a LAS/LAZ output the writer would refuse at the end:
     input files of different point formats or dimensions (no one layout holds them), or an
-    input dimension that clashes with one the output adds (:func:`.las.output_header`)."""
+    input dimension that clashes with one the output adds (:func:`.las_output.output_header`)."""
     if output.suffix.lower() in LAS_SUFFIXES and source.is_las:
-        from ..io.las import output_header
+        from ..io.las_output import output_header
         output_header(source.template_header(), path=output)
 
 
@@ -139,7 +139,7 @@ def regrids(output, source):
 def guard_limit(limit, output, source, ts):
     """The distance the tiles' ``max_spacing`` guard works to: ``limit``, less the most a
     LAS/LAZ output's quantisation moves a kept point where it puts points on a grid they
-    were not read from — a non-LAS input (:func:`.las.new_header`: a thousandth of the
+    were not read from — a non-LAS input (:func:`.las_output.new_header`: a thousandth of the
     spacing) or LAS files on other scales or offsets than the first's, whose grid the output
     takes. Half a step on each axis, and the rounding of ``X * scale + offset`` read back:
     the points of the file then still lie within ``limit`` of every input point (on the
@@ -151,7 +151,7 @@ def guard_limit(limit, output, source, ts):
     if source.is_las:
         scales = source.scales
     else:
-        from ..io.las import new_header
+        from ..io.las_output import new_header
         scales = np.asarray(new_header(lo, hi, ts.spacing).scales, dtype=np.float64)
     move = float(0.5 * np.linalg.norm(scales)
                  + 4 * np.linalg.norm(np.spacing(np.maximum(np.abs(lo), np.abs(hi)))))
