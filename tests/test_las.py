@@ -835,7 +835,8 @@ def test_a_non_las_inputs_dimensions_find_a_place_in_a_las_output():
     output — a standard dimension where it holds integers (or the standard one is a float),
     else extra bytes of its own type under its own name, or with its type added where that
     name is taken in any case; LAS's types for bool and float16; one per element of a trailing
-    shape; names cut to LAS's 32 bytes and kept apart; the simplifier's own left out."""
+    shape; names cut to LAS's 32 bytes and kept apart; the simplifier's own left out; integers
+    whose range does not fit the standard dimension of their name beside it."""
     from tiledsimplify.io.las_output import carried_layout
     attrs = {"intensity": ("f4", ()), "classification": ("u1", ()), "red": ("u2", ()),
              "gps_time": ("f8", ()), "user_data": ("f8", ()), "Intensity": ("i4", ()),
@@ -860,3 +861,14 @@ def test_a_non_las_inputs_dimensions_find_a_place_in_a_las_output():
     header = laspy.LasHeader(point_format=7, version="1.4")
     header.add_extra_dims(params)  # LAS takes them all
     assert set(plan) <= set(header.point_format.dimension_names)
+    # integers that do not fit the standard dimension of their name keep their own type
+    ints = {"classification": ("i4", ()), "return_number": ("i8", ()),
+            "point_source_id": ("u4", ()), "user_data": ("u1", ())}
+    params, plan = carried_layout(ints, laspy.PointFormat(6), ranges={
+        "classification": (-1, 40), "return_number": (1, 3), "point_source_id": (0, 70_000)})
+    assert {p.name: np.dtype(p.type) for p in params} == {
+        "classification_int32": np.int32, "point_source_id_uint32": np.uint32}
+    assert plan == {"classification_int32": ("classification", None),
+                    "return_number": ("return_number", None),
+                    "point_source_id_uint32": ("point_source_id", None),
+                    "user_data": ("user_data", None)}  # no range given: as before

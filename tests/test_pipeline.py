@@ -807,7 +807,7 @@ def test_las_output_of_a_non_las_input(bunny, tmp_path, suffix):
 
 
 def test_a_las_output_keeps_every_column_of_a_text_input(tmp_path, cluster):
-    """A text file's columns reach a LAS output (:func:`.las.carried_layout`): its colour as
+    """A text file's columns reach a LAS output (:func:`.las_output.carried_layout`): its colour as
     LAS colour (point format 7), its float ``Intensity`` and ``Deviation`` as float64 extra
     bytes — ``Intensity_float64`` beside LAS's own ``intensity`` — their values the input's
     at the kept points; here and on a cluster, whose workers pack and compress the LAZ
@@ -838,6 +838,34 @@ def test_a_las_output_keeps_every_column_of_a_text_input(tmp_path, cluster):
     assert not np.asarray(las.intensity).any()
     np.testing.assert_array_equal(las["Intensity_float64"], inten[rows])
     np.testing.assert_array_equal(las["Deviation"], dev[rows])
+
+
+def test_integers_a_las_dimension_cannot_hold_keep_their_own_type(tmp_path):
+    """A structured NPY's int32 ``classification`` of -1 .. 40 in a LAS output: LAS's uint8
+    classification cannot hold -1, so the values go to ``classification_int32`` (by the
+    range the ingest recorded, :attr:`.TileStore.attribute_range`) and the standard one
+    stays 0; its uint16 ``intensity`` fits and goes there. The run used to fail at its very
+    end, the work done: "dimension 'classification' (uint8) cannot hold values -1 .. 40"."""
+    from scipy.spatial import cKDTree
+    rng = np.random.default_rng(3)
+    n = 5000
+    t = np.zeros(n, dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("classification", "i4"),
+                           ("intensity", "u2")])
+    t["x"], t["y"] = rng.random(n), rng.random(n)
+    t["z"] = 0.1 * np.sin(6 * t["x"])
+    t["classification"] = rng.integers(-1, 41, n)
+    t["intensity"] = rng.integers(0, 60000, n)
+    np.save(tmp_path / "in.npy", t)
+    s = run(tmp_path / "in.npy", tmp_path / "out.laz", ratio=0.2, tile_points=2000)
+    las = laspy.read(tmp_path / "out.laz")
+    assert len(las.points) == s.n_output == 1000
+    assert list(las.point_format.extra_dimension_names)[0] == "classification_int32"
+    xyz = np.c_[t["x"], t["y"], t["z"]]
+    d, rows = cKDTree(xyz).query(np.c_[las.x, las.y, las.z])
+    assert d.max() < float(np.linalg.norm(las.header.scales))
+    np.testing.assert_array_equal(las["classification_int32"], t["classification"][rows])
+    np.testing.assert_array_equal(np.asarray(las.intensity), t["intensity"][rows])
+    assert not np.asarray(las.classification).any()
 
 
 def test_cli_run_with_config(bunny, tmp_path, caplog):

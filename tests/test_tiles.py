@@ -483,14 +483,16 @@ def test_ingest_in_parts_holds_what_one_ingest_holds(tmp_path, n_total):
                              map_parts=thread_map, buffer_points=2_500, **kw)
     assert whole.plan == split.plan and whole.spacing == split.spacing
     assert np.array_equal(whole.tile_counts, split.tile_counts)
-    # the largest value of each integer attribute, over every part (a points file's colour)
-    want = {k: int(v.max()) for k, v in attrs.items() if v.dtype.kind in "iu"}
-    assert whole.attribute_max == split.attribute_max == want and "gps_time" not in want
+    # the least and largest value of each integer attribute, over every part (a points
+    # file's colour; which values a LAS dimension holds)
+    want = {k: (int(v.min()), int(v.max())) for k, v in attrs.items() if v.dtype.kind in "iu"}
+    assert whole.attribute_range == split.attribute_range == want and "gps_time" not in want
+    assert whole.attribute_max == {k: hi for k, (_, hi) in want.items()}
     # a store made before the ingest recorded them (a run resumed): read from its tiles
     root = zarr.open_group(tmp_path / "whole", mode="r+")
-    del root.attrs["attribute_max"]
+    del root.attrs["attribute_range"]
     old = TileStore.open(tmp_path / "whole")
-    assert "attribute_max" not in old.root_attrs and old.attribute_max == want
+    assert "attribute_range" not in old.root_attrs and old.attribute_range == want
     a = split.root_attrs
     assert a["ingest_parts"] == 4 and len(a["part_starts"]) == 4
     assert np.array_equal(np.sum(a["part_counts"], axis=0), split.tile_counts)

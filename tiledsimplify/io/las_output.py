@@ -129,13 +129,16 @@ def _free_name(name, taken):
     return out
 
 
-def carried_layout(attributes, point_format, reserved=()):
+def carried_layout(attributes, point_format, reserved=(), ranges=None):
     """Where a LAS output of a non-LAS input puts each dimension the input carried
     (``attributes``: name -> ``(dtype, trailing shape)``, PLY properties, text columns, E57
     intensity and colour), nothing dropped.
 
     A dimension named as one of ``point_format``'s standard dimensions goes there if it holds
-    integers (or bools), or the standard one is a float (``gps_time``). Every other becomes an
+    integers (or bools) that fit it — by ``ranges`` (name -> the input's least and largest
+    value: :attr:`.TileStore.attribute_range`), where given, so a PLY's int ``classification``
+    of -1 .. 40 does not fail the output at the end of a run — or the standard one is a float
+    (``gps_time``). Every other becomes an
     extra-bytes dimension of its own type (bool as uint8, float16 as float32), one per element
     of a trailing shape (``name_0``...), under its own name, or with its type added where that
     name is taken in any case (PDAL ignores case): the Bunny PLY's float ``intensity`` (0..1)
@@ -149,18 +152,21 @@ def carried_layout(attributes, point_format, reserved=()):
         The extra-bytes dimensions to add to the header, and for each dimension filled from
         the input, ``{output name: (input name, element index or None)}``.
     """
-    standard = {d.name: np.dtype(d.dtype) if d.dtype is not None else np.dtype(np.uint8)
-                for d in point_format.dimensions if d.name not in _XYZ}
+    standard = {d.name: d for d in point_format.dimensions if d.name not in _XYZ}
+    ranges = ranges or {}
     taken = {n.lower() for n in list(standard) + list(_XYZ) + [d[0] for d in SIMPLIFY_DIMS]}
     params, plan = [], {}
     for name, (dtype, trail) in attributes.items():
         dtype, trail = np.dtype(dtype), tuple(trail)
         if name in reserved or name in ("x", "y", "z"):
             continue
-        if name in standard and not trail and (dtype.kind in "biu"
-                                               or standard[name].kind == dtype.kind == "f"):
-            plan[name] = (name, None)
-            continue
+        dim = standard.get(name)
+        if dim is not None and not trail:
+            lo, hi = ranges.get(name, (dim.min, dim.max))
+            if dtype.kind == "b" or dtype.kind in "iu" and dim.min <= lo and hi <= dim.max or (
+                    dtype.kind == "f" and dim.dtype is not None and dim.dtype.kind == "f"):
+                plan[name] = (name, None)
+                continue
         if dtype.kind not in "biuf":
             continue  # not a number: no LAS type holds it
         kind = np.dtype(np.uint8) if dtype.kind == "b" else dtype

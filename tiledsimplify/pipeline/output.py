@@ -52,7 +52,7 @@ def new_las_header(ts):
                         colour=all(c in ts.attribute_names for c in COLOURS))
     spec = {name: (np.dtype(v["dtype"]), tuple(v["shape"]))
             for name, v in ts.root_attrs["attributes"].items()}
-    params, plan = carried_layout(spec, header.point_format, RESERVED)
+    params, plan = carried_layout(spec, header.point_format, RESERVED, ts.attribute_range)
     if params:
         header.add_extra_dims(params)
     return header, plan

@@ -310,15 +310,15 @@ class ReadOnce:
 def scan_part(part, sample_size: int, seed: int, limit: int | None, progress=None) -> dict:
     """Pass 1 of the ingest over one part of the input: its chunks' ``(start, size)``, its
     bounds, its sample (the part's smallest keys, below ``limit`` if given:
-    :class:`sampling.BottomK`), the attribute schema of its first chunk and the largest value
-    of each integer attribute. Runs where ``map_parts`` puts it."""
+    :class:`sampling.BottomK`), the attribute schema of its first chunk and the least and
+    largest value of each integer attribute. Runs where ``map_parts`` puts it."""
     check = ChunkChecker()
     sampler = BottomK(sample_size, seed, limit)
     intervals: list[tuple[int, int]] = []
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     read = 0
-    top: dict[str, int] = {}  # each integer attribute's largest value
+    ranges: dict[str, list[int]] = {}  # each integer attribute's least and largest value
     for item in read_ahead(part()):
         start, xyz, attrs = check(item)
         m = xyz.shape[0]
@@ -328,25 +328,32 @@ def scan_part(part, sample_size: int, seed: int, limit: int | None, progress=Non
             progress(read)
         if not m:
             continue
-        for name, values in attrs.items():
-            if values.dtype.kind in "iu":
-                v = int(values.max())
-                top[name] = max(v, top.get(name, v))
+        ranges = merge_ranges([ranges, value_ranges(attrs)])
         c_lo, c_hi = box(xyz)
         lo = np.minimum(lo, c_lo)
         hi = np.maximum(hi, c_hi)
         sampler.add(start, xyz)
     return {"points": read, "intervals": intervals, "lo": lo, "hi": hi, "keys": sampler.keys,
             "index": sampler.index, "xyz": sampler.xyz, "spec": check.spec,
-            "attribute_max": top}
+            "attribute_range": ranges}
 
 
-def merge_max(tops):
-    """The largest value of each integer attribute over the parts' (:func:`scan_part`)."""
-    out: dict[str, int] = {}
-    for top in tops:
-        for name, v in top.items():
-            out[name] = max(int(v), out.get(name, int(v)))
+def value_ranges(attrs):
+    """``[least, largest]`` of each integer attribute of ``attrs`` that holds values."""
+    return {name: [int(v.min()), int(v.max())] for name, v in attrs.items()
+            if v.dtype.kind in "iu" and v.size}
+
+
+def merge_ranges(ranges):
+    """The least and largest value of each integer attribute over ``ranges`` (name ->
+    ``[least, largest]``: the parts', :func:`scan_part`; the chunks', :func:`value_ranges`)."""
+    out: dict[str, list[int]] = {}
+    for r in ranges:
+        for name, (lo, hi) in r.items():
+            lo, hi = int(lo), int(hi)
+            if name in out:
+                lo, hi = min(lo, out[name][0]), max(hi, out[name][1])
+            out[name] = [lo, hi]
     return out
 
 
