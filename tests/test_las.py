@@ -832,28 +832,30 @@ def test_folder_reads_every_laz(tmp_path):
 
 def test_a_non_las_inputs_dimensions_find_a_place_in_a_las_output():
     """:func:`carried_layout`: every numeric dimension of a non-LAS input has a place in a LAS
-    output — a standard dimension where it holds integers (or the standard one is a float),
-    else extra bytes of its own type under its own name, or with its type added where that
-    name is taken in any case; LAS's types for bool and float16; one per element of a trailing
-    shape; names cut to LAS's 32 bytes and kept apart; the simplifier's own left out; integers
-    whose range does not fit the standard dimension of their name beside it."""
+    output — the standard dimension of its name (in PDAL's or CloudCompare's spelling too)
+    where its values fit it: integers within its range, a float column of whole numbers
+    within it, any number into a float dimension — else extra bytes of its own type under its
+    own name, or with its type added where that name is taken in any case; LAS's types for
+    bool and float16; one per element of a trailing shape; names cut to LAS's 32 bytes and
+    kept apart; the simplifier's own left out."""
     from tiledsimplify.io.las_output import carried_layout
     attrs = {"intensity": ("f4", ()), "classification": ("u1", ()), "red": ("u2", ()),
              "gps_time": ("f8", ()), "user_data": ("f8", ()), "Intensity": ("i4", ()),
              "confidence": ("f4", ()), "flag": ("?", ()), "half": ("f2", ()),
              "normal_guess": ("f8", (3,)), "sharp_edge": ("u1", ()), "label": ("U4", ()),
              "a" * 40: ("i2", ()), "a" * 35: ("u4", ())}
+    # no stats: integers go into the standard dimension of their name, floats do not
     params, plan = carried_layout(attrs, laspy.PointFormat(7), reserved={"sharp_edge"})
     types = {p.name: np.dtype(p.type) for p in params}
     assert types == {
         "intensity_float32": np.float32, "user_data_float64": np.float64,
-        "Intensity_int32": np.int32, "confidence": np.float32, "flag": np.uint8,
+        "confidence": np.float32, "flag": np.uint8,
         "half": np.float32, "normal_guess_0": np.float64, "normal_guess_1": np.float64,
         "normal_guess_2": np.float64, "a" * 32: np.int16, "a" * 30 + "_1": np.uint32}
     assert plan == {
         "intensity_float32": ("intensity", None), "classification": ("classification", None),
         "red": ("red", None), "gps_time": ("gps_time", None),
-        "user_data_float64": ("user_data", None), "Intensity_int32": ("Intensity", None),
+        "user_data_float64": ("user_data", None), "intensity": ("Intensity", None),
         "confidence": ("confidence", None), "flag": ("flag", None), "half": ("half", None),
         "normal_guess_0": ("normal_guess", 0), "normal_guess_1": ("normal_guess", 1),
         "normal_guess_2": ("normal_guess", 2), "a" * 32: ("a" * 40, None),
@@ -861,14 +863,26 @@ def test_a_non_las_inputs_dimensions_find_a_place_in_a_las_output():
     header = laspy.LasHeader(point_format=7, version="1.4")
     header.add_extra_dims(params)  # LAS takes them all
     assert set(plan) <= set(header.point_format.dimension_names)
-    # integers that do not fit the standard dimension of their name keep their own type
-    ints = {"classification": ("i4", ()), "return_number": ("i8", ()),
-            "point_source_id": ("u4", ()), "user_data": ("u1", ())}
-    params, plan = carried_layout(ints, laspy.PointFormat(6), ranges={
-        "classification": (-1, 40), "return_number": (1, 3), "point_source_id": (0, 70_000)})
+    # by the input's stats: values that do not fit the standard dimension keep their own type
+    dims = {"classification": ("i4", ()), "return_number": ("i8", ()),
+            "point_source_id": ("u4", ()), "user_data": ("u1", ()),
+            "Intensity": ("f8", ()), "NumberOfReturns": ("f8", ()), "Scan Angle": ("f8", ()),
+            "GpsTime": ("f8", ()), "Withheld": ("f8", ()), "Overlap": ("f8", ())}
+    params, plan = carried_layout(dims, laspy.PointFormat(6), stats={
+        "classification": (-1, 40, True), "return_number": (1, 3, True),
+        "point_source_id": (0, 70_000, True), "Intensity": (0.0, 999.0, True),
+        "NumberOfReturns": (1.0, 3.0, True), "Scan Angle": (-90.0, 90.0, True),
+        "GpsTime": (0.5, 1e6, False), "Withheld": (0.0, 1.5, False),
+        "Overlap": (None, None, False)})
     assert {p.name: np.dtype(p.type) for p in params} == {
-        "classification_int32": np.int32, "point_source_id_uint32": np.uint32}
+        "classification_int32": np.int32, "point_source_id_uint32": np.uint32,
+        "Withheld_float64": np.float64, "Overlap_float64": np.float64}
     assert plan == {"classification_int32": ("classification", None),
                     "return_number": ("return_number", None),
                     "point_source_id_uint32": ("point_source_id", None),
-                    "user_data": ("user_data", None)}  # no range given: as before
+                    "user_data": ("user_data", None),  # no stats: as it is
+                    "intensity": ("Intensity", None),
+                    "number_of_returns": ("NumberOfReturns", None),
+                    "scan_angle": ("Scan Angle", None), "gps_time": ("GpsTime", None),
+                    "Withheld_float64": ("Withheld", None),
+                    "Overlap_float64": ("Overlap", None)}

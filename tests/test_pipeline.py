@@ -807,21 +807,25 @@ def test_las_output_of_a_non_las_input(bunny, tmp_path, suffix):
 
 
 def test_a_las_output_keeps_every_column_of_a_text_input(tmp_path, cluster):
-    """A text file's columns reach a LAS output (:func:`.las_output.carried_layout`): its colour as
-    LAS colour (point format 7), its float ``Intensity`` and ``Deviation`` as float64 extra
-    bytes — ``Intensity_float64`` beside LAS's own ``intensity`` — their values the input's
-    at the kept points; here and on a cluster, whose workers pack and compress the LAZ
-    (``output._write_laz_chunks``), the same bytes. Only the colour came through before."""
+    """A text file's columns reach a LAS output (:func:`.las_output.carried_layout`): its
+    colour as LAS colour (point format 7); its ``Intensity`` and ``Classification`` columns
+    of whole numbers (read as float64) in LAS's own, as PDAL would put them, and its
+    fractional ``Deviation`` as float64 extra bytes, each value the input's at the kept
+    points; here and on a cluster, whose workers pack and compress the LAZ
+    (``output._write_laz_chunks``), the same bytes; a ``Classification`` with a -1, which
+    LAS's cannot hold, beside it as ``Classification_float64``. Only the colour came through
+    before."""
     from scipy.spatial import cKDTree
     rng = np.random.default_rng(5)
     n = 6000
     xyz = np.round(np.c_[rng.random((n, 2)), 0.2 * np.abs(rng.random(n) - 0.5)], 6)
     rgb = rng.integers(0, 256, (n, 3))
-    inten, dev = rng.integers(0, 1000, n), np.round(rng.normal(size=n), 4)
+    inten, cls = rng.integers(0, 1000, n), rng.integers(0, 20, n)
+    dev = np.round(rng.normal(size=n), 4)
     path = tmp_path / "cc.txt"
-    path.write_text("//X,Y,Z,R,G,B,Intensity,Deviation\n" + "".join(
-        "%.6f,%.6f,%.6f,%d,%d,%d,%d,%.4f\n" % (*p, *c, i, d)
-        for p, c, i, d in zip(xyz, rgb, inten, dev)))
+    path.write_text("//X,Y,Z,R,G,B,Intensity,Classification,Deviation\n" + "".join(
+        "%.6f,%.6f,%.6f,%d,%d,%d,%d,%d,%.4f\n" % (*p, *c, i, k, d)
+        for p, c, i, k, d in zip(xyz, rgb, inten, cls, dev)))
     kw = dict(ratio=0.2, tile_points=2000)
     run(path, tmp_path / "here.laz", **kw)
     run(path, tmp_path / "cluster.laz", client=cluster, **kw)
@@ -829,15 +833,29 @@ def test_a_las_output_keeps_every_column_of_a_text_input(tmp_path, cluster):
     las = laspy.read(tmp_path / "here.laz")
     assert las.header.point_format.id == 7 and len(las.points) == 1200
     assert list(las.point_format.extra_dimension_names) == [
-        "Intensity_float64", "Deviation", "sharp_edge", "importance", "simplify_rank"]
+        "Deviation", "sharp_edge", "importance", "simplify_rank"]
     d, rows = cKDTree(xyz).query(np.c_[las.x, las.y, las.z])
     assert d.max() < float(np.linalg.norm(las.header.scales))  # quantised to the grid
     assert len(np.unique(rows)) == 1200
     for j, c in enumerate(("red", "green", "blue")):
         np.testing.assert_array_equal(np.asarray(las[c]), 257 * rgb[rows, j])
-    assert not np.asarray(las.intensity).any()
-    np.testing.assert_array_equal(las["Intensity_float64"], inten[rows])
+    np.testing.assert_array_equal(np.asarray(las.intensity), inten[rows])
+    np.testing.assert_array_equal(np.asarray(las.classification), cls[rows])
     np.testing.assert_array_equal(las["Deviation"], dev[rows])
+    # one value that LAS's classification cannot hold: the column keeps its own type
+    lines = path.read_text().splitlines()
+    first = lines[1].split(",")
+    first[7] = "-1"
+    path.write_text("\n".join([lines[0], ",".join(first)] + lines[2:]) + "\n")
+    run(path, tmp_path / "minus.laz", ratio=1.0, tile_points=2000)
+    las = laspy.read(tmp_path / "minus.laz")
+    assert list(las.point_format.extra_dimension_names)[:2] == [
+        "Classification_float64", "Deviation"]
+    d, rows = cKDTree(xyz).query(np.c_[las.x, las.y, las.z])
+    want = cls[rows].astype(float)
+    want[rows == 0] = -1
+    np.testing.assert_array_equal(las["Classification_float64"], want)
+    assert not np.asarray(las.classification).any()
 
 
 def test_integers_a_las_dimension_cannot_hold_keep_their_own_type(tmp_path):

@@ -57,6 +57,7 @@ import copy
 import datetime
 import errno
 import os
+import re
 import tempfile
 from pathlib import Path
 from typing import Mapping
@@ -117,66 +118,90 @@ def new_header(lo, hi, spacing, colour=False) -> laspy.LasHeader:
 _NAME_BYTES = 32
 
 
+def _key(name):
+    """A dimension name as PDAL and CloudCompare spellings of LAS's match it: lower case,
+    letters and digits only (``NumberOfReturns``, ``Number Of Returns``,
+    ``number_of_returns``)."""
+    return re.sub(r"[^a-z0-9]", "", name.lower())
+
+
 def _free_name(name, taken):
     """``name`` cut to the LAS name field, with a number added until no name in ``taken``
-    (lower case: PDAL's dimension names ignore case) is the same."""
+    (as :func:`_key` gives them: PDAL's dimension names ignore case) is the same."""
     base = name.encode("utf-8")[:_NAME_BYTES].decode("utf-8", "ignore")
     out, i = base, 1
-    while out.lower() in taken:
+    while _key(out) in taken:
         tail = f"_{i}"
         out = base.encode("utf-8")[:_NAME_BYTES - len(tail)].decode("utf-8", "ignore") + tail
         i += 1
     return out
 
 
-def carried_layout(attributes, point_format, reserved=(), ranges=None):
+def _fits(dim, dtype, stats):
+    """Whether an input dimension of type ``dtype`` and ``stats`` (``(least, largest,
+    whole)`` or None: unknown) goes into the standard LAS dimension ``dim``."""
+    if dtype.kind == "b":
+        return True
+    if dim.dtype is not None and dim.dtype.kind == "f":
+        return dtype.kind in "iuf"
+    if dtype.kind in "iu" and stats is None:
+        return True  # the range is not known (a caller without it): the values are checked
+    if dtype.kind not in "iuf" or stats is None:
+        return False
+    lo, hi, whole = stats
+    return bool(whole) and lo is not None and dim.min <= lo and hi <= dim.max
+
+
+def carried_layout(attributes, point_format, reserved=(), stats=None):
     """Where a LAS output of a non-LAS input puts each dimension the input carried
     (``attributes``: name -> ``(dtype, trailing shape)``, PLY properties, text columns, E57
     intensity and colour), nothing dropped.
 
-    A dimension named as one of ``point_format``'s standard dimensions goes there if it holds
-    integers (or bools) that fit it — by ``ranges`` (name -> the input's least and largest
-    value: :attr:`.TileStore.attribute_range`), where given, so a PLY's int ``classification``
-    of -1 .. 40 does not fail the output at the end of a run — or the standard one is a float
-    (``gps_time``). Every other becomes an
-    extra-bytes dimension of its own type (bool as uint8, float16 as float32), one per element
-    of a trailing shape (``name_0``...), under its own name, or with its type added where that
-    name is taken in any case (PDAL ignores case): the Bunny PLY's float ``intensity`` (0..1)
-    is kept as ``intensity_float32``, LAS's 16-bit ``intensity`` left 0; a number is added if
-    that is taken too. Names in ``reserved`` are left out (the simplifier's own dimensions,
-    which the output adds anew).
+    A dimension named as one of ``point_format``'s standard dimensions — in any case, with or
+    without ``_`` and spaces, as PDAL (``Classification``, ``NumberOfReturns``) and
+    CloudCompare name them — goes there if its values fit it, by ``stats`` (name -> the
+    input's least and largest value and whether all are whole numbers:
+    :attr:`.TileStore.attribute_stats`): integers within its range — a PLY's int
+    ``classification`` of -1 .. 40 would fail the output at the end of a run — or a text
+    file's float column of whole numbers within it; any number into a float dimension
+    (``gps_time``). Without ``stats``, integers go there as they are and floats do not. Every
+    other becomes an extra-bytes dimension of its own type (bool as uint8, float16 as
+    float32), one per element of a trailing shape (``name_0``...), under its own name, or
+    with its type added where that name is taken (PDAL ignores case): the Bunny PLY's float
+    ``intensity`` (0..1) is kept as ``intensity_float32``, LAS's 16-bit ``intensity`` left 0;
+    a number is added if that is taken too. Names in ``reserved`` are left out (the
+    simplifier's own dimensions, which the output adds anew).
 
     Returns
     -------
     (list of laspy.ExtraBytesParams, dict)
         The extra-bytes dimensions to add to the header, and for each dimension filled from
-        the input, ``{output name: (input name, element index or None)}``.
+        the input, ``{output name: (input name, element index or None)}`` (a float's whole
+        numbers are cast to the standard dimension's integers where they are packed).
     """
-    standard = {d.name: d for d in point_format.dimensions if d.name not in _XYZ}
-    ranges = ranges or {}
-    taken = {n.lower() for n in list(standard) + list(_XYZ) + [d[0] for d in SIMPLIFY_DIMS]}
+    standard = {_key(d.name): d for d in point_format.dimensions if d.name not in _XYZ}
+    stats = stats or {}
+    taken = {_key(n) for n in list(_XYZ) + [d[0] for d in SIMPLIFY_DIMS]} | set(standard)
     params, plan = [], {}
     for name, (dtype, trail) in attributes.items():
         dtype, trail = np.dtype(dtype), tuple(trail)
         if name in reserved or name in ("x", "y", "z"):
             continue
-        dim = standard.get(name)
-        if dim is not None and not trail:
-            lo, hi = ranges.get(name, (dim.min, dim.max))
-            if dtype.kind == "b" or dtype.kind in "iu" and dim.min <= lo and hi <= dim.max or (
-                    dtype.kind == "f" and dim.dtype is not None and dim.dtype.kind == "f"):
-                plan[name] = (name, None)
-                continue
+        dim = standard.get(_key(name))
+        if dim is not None and not trail and dim.name not in plan \
+                and _fits(dim, dtype, stats.get(name)):
+            plan[dim.name] = (name, None)
+            continue
         if dtype.kind not in "biuf":
             continue  # not a number: no LAS type holds it
         kind = np.dtype(np.uint8) if dtype.kind == "b" else dtype
         if kind.kind == "f":  # LAS holds float32 and float64
             kind = np.dtype(np.float32 if kind.itemsize <= 4 else np.float64)
-        label = name if name.lower() not in taken else f"{name}_{dtype.name}"
+        label = name if _key(name) not in taken else f"{name}_{dtype.name}"
         size = int(np.prod(trail, dtype=np.int64))
         for i in range(size) if trail else (None,):
             out = _free_name(label if i is None else f"{label}_{i}", taken)
-            taken.add(out.lower())
+            taken.add(_key(out))
             params.append(laspy.ExtraBytesParams(
                 name=out, type=kind.newbyteorder("<"),
                 description=_short(f"input {name}" + ("" if i is None else f"[{i}]"), 32)))

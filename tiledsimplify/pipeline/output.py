@@ -52,7 +52,7 @@ def new_las_header(ts):
                         colour=all(c in ts.attribute_names for c in COLOURS))
     spec = {name: (np.dtype(v["dtype"]), tuple(v["shape"]))
             for name, v in ts.root_attrs["attributes"].items()}
-    params, plan = carried_layout(spec, header.point_format, RESERVED, ts.attribute_range)
+    params, plan = carried_layout(spec, header.point_format, RESERVED, ts.attribute_stats)
     if params:
         header.add_extra_dims(params)
     return header, plan
@@ -93,6 +93,8 @@ def _tile_piece(store_path, tile, prefix, refined, layout, plan, start=None, exp
     else:  # a new LAS 1.4 layout: the dimensions the input carried (E57 intensity, colour,
         # PLY properties, text columns), each where the plan puts it
         stored = ts.attrs(tile, sorted({name for name, _ in plan.values()}))
+        floats = {d.name for d in layout.header.point_format.dimensions
+                  if d.dtype is not None and d.dtype.kind == "f"}
         attrs = {}
         for name in layout.attribute_names:
             if name not in plan:
@@ -100,7 +102,10 @@ def _tile_piece(store_path, tile, prefix, refined, layout, plan, start=None, exp
                 continue
             source, element = plan[name]
             values = stored[source][keep]
-            attrs[name] = values if element is None else values.reshape(k, -1)[:, element]
+            values = values if element is None else values.reshape(k, -1)[:, element]
+            if values.dtype.kind == "f" and name not in floats:  # whole numbers (the plan's)
+                values = values.astype(np.int64)
+            attrs[name] = values
     piece = layout.pack(xyz, attrs, {"sharp_edge": boundary.astype(np.uint8),
                                      "importance": np.full(k, np.nan),
                                      "simplify_rank": np.full(k, -1, dtype=np.int64)})

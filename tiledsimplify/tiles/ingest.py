@@ -311,14 +311,15 @@ def scan_part(part, sample_size: int, seed: int, limit: int | None, progress=Non
     """Pass 1 of the ingest over one part of the input: its chunks' ``(start, size)``, its
     bounds, its sample (the part's smallest keys, below ``limit`` if given:
     :class:`sampling.BottomK`), the attribute schema of its first chunk and the least and
-    largest value of each integer attribute. Runs where ``map_parts`` puts it."""
+    largest value of each numeric attribute (:func:`value_stats`). Runs where ``map_parts``
+    puts it."""
     check = ChunkChecker()
     sampler = BottomK(sample_size, seed, limit)
     intervals: list[tuple[int, int]] = []
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     read = 0
-    ranges: dict[str, list[int]] = {}  # each integer attribute's least and largest value
+    stats: dict[str, list] = {}  # each numeric attribute's least, largest value, whole or not
     for item in read_ahead(part()):
         start, xyz, attrs = check(item)
         m = xyz.shape[0]
@@ -328,32 +329,49 @@ def scan_part(part, sample_size: int, seed: int, limit: int | None, progress=Non
             progress(read)
         if not m:
             continue
-        ranges = merge_ranges([ranges, value_ranges(attrs)])
+        stats = merge_stats([stats, value_stats(attrs)])
         c_lo, c_hi = box(xyz)
         lo = np.minimum(lo, c_lo)
         hi = np.maximum(hi, c_hi)
         sampler.add(start, xyz)
     return {"points": read, "intervals": intervals, "lo": lo, "hi": hi, "keys": sampler.keys,
             "index": sampler.index, "xyz": sampler.xyz, "spec": check.spec,
-            "attribute_range": ranges}
+            "attribute_stats": stats}
 
 
-def value_ranges(attrs):
-    """``[least, largest]`` of each integer attribute of ``attrs`` that holds values."""
-    return {name: [int(v.min()), int(v.max())] for name, v in attrs.items()
-            if v.dtype.kind in "iu" and v.size}
+def value_stats(attrs):
+    """``[least, largest, whole]`` of each numeric attribute of ``attrs`` that holds values,
+    ``whole`` whether every value is a whole number — always for integers; a text file's
+    float columns may hold a LAS dimension's integers (:func:`.las_output.carried_layout`).
+    A float attribute holding NaN or infinities gets ``[None, None, False]``."""
+    out = {}
+    for name, v in attrs.items():
+        if not v.size or v.dtype.kind not in "iuf":
+            continue
+        if v.dtype.kind in "iu":
+            out[name] = [int(v.min()), int(v.max()), True]
+            continue
+        lo, hi = float(v.min()), float(v.max())  # NaN if any value is
+        if np.isfinite(lo) and np.isfinite(hi):
+            out[name] = [lo, hi, bool((np.floor(v) == v).all())]
+        else:
+            out[name] = [None, None, False]
+    return out
 
 
-def merge_ranges(ranges):
-    """The least and largest value of each integer attribute over ``ranges`` (name ->
-    ``[least, largest]``: the parts', :func:`scan_part`; the chunks', :func:`value_ranges`)."""
-    out: dict[str, list[int]] = {}
-    for r in ranges:
-        for name, (lo, hi) in r.items():
-            lo, hi = int(lo), int(hi)
+def merge_stats(stats):
+    """The least and largest value of each numeric attribute over ``stats`` (name ->
+    ``[least, largest, whole]``: the parts', :func:`scan_part`; the chunks',
+    :func:`value_stats`), whole where each is; None where one is."""
+    out: dict[str, list] = {}
+    for each in stats:
+        for name, (lo, hi, whole) in each.items():
             if name in out:
-                lo, hi = min(lo, out[name][0]), max(hi, out[name][1])
-            out[name] = [lo, hi]
+                a, b, w = out[name]
+                lo = None if lo is None or a is None else min(lo, a)
+                hi = None if hi is None or b is None else max(hi, b)
+                whole = bool(whole and w)
+            out[name] = [lo, hi, whole]
     return out
 
 

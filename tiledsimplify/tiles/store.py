@@ -25,10 +25,11 @@ Root attributes: ``format``/``format_version``, ``complete`` (false until the in
 finished), ``plan`` (:meth:`TilePlan.to_dict`), ``halo``, ``halo_is_default``, ``spacing``,
 ``spacing_estimate`` (how it was obtained), ``n_total``, ``tile_points``, ``tile_counts``,
 ``bounds``, ``chunk_rows``, ``attributes`` (name -> dtype and trailing shape),
-``attribute_range`` (name -> its least and largest value, integer attributes; since
-2026-12-07, stop 66), ``sample_size``, ``seed``, ``ingest_parts``, ``part_starts`` and
-``part_counts`` (below), ``config`` (the caller's dict) and ``provenance`` (the caller's dict
-plus package, zarr and numpy versions and the UTC creation time).
+``attribute_stats`` (name -> its least and largest value and whether all are whole numbers,
+numeric attributes; since 2026-12-07, stop 66), ``sample_size``, ``seed``, ``ingest_parts``,
+``part_starts`` and ``part_counts`` (below), ``config`` (the caller's dict) and
+``provenance`` (the caller's dict plus package, zarr and numpy versions and the UTC creation
+time).
 
 The ingest reads the input as consecutive parts (one by default; several read by workers at
 once, :meth:`TileStore.create`'s ``parts``). Each part owns a region of every tile's
@@ -61,8 +62,8 @@ import zarr
 from zarr.core.group import GroupMetadata
 
 from ..errors import InputError, TiledSimplifyError
-from .ingest import (ReadOnce, fill_part, lay_out_tiles, map_here, merge_ranges, merge_specs,
-                     scan_part, value_ranges)
+from .ingest import (ReadOnce, fill_part, lay_out_tiles, map_here, merge_specs, merge_stats,
+                     scan_part, value_stats)
 from .layout import (NAME_RE, array_templates, attribute_layout, codec, tile_nodes,
                      unpack_attribute)
 from .local_store import InlineStore
@@ -352,7 +353,7 @@ class TileStore:
             "chunk_rows": chunk_rows,
             "attributes": {k: {"dtype": dt.str, "shape": list(tr)} for k, (dt, tr)
                            in spec.items()},
-            "attribute_range": merge_ranges(scan["attribute_range"] for scan in scans),
+            "attribute_stats": merge_stats(scan["attribute_stats"] for scan in scans),
             "sample_size": sample_size,
             "seed": int(seed),
             "ingest_parts": n_parts,
@@ -531,22 +532,26 @@ class TileStore:
         return {k: np.dtype(v["dtype"]) for k, v in self._attrs["attributes"].items()}
 
     @property
-    def attribute_range(self) -> dict[str, tuple[int, int]]:
-        """The least and largest value of each integer attribute in the input: recorded by
-        the ingest (since 2026-12-07, stop 66); for a store made before (a run resumed),
-        worked out once from the tiles' core points (every input point once) — without them a
-        resumed run's 8-bit colour in 16-bit fields would be written ``v >> 8``, and a LAS
-        output could not tell which values fit a LAS dimension."""
-        if "attribute_range" not in self._attrs:
-            names = [n for n, d in self.attribute_dtypes.items() if d.kind in "iu"]
-            self._attrs["attribute_range"] = merge_ranges(
-                value_ranges(self.attrs(t, names)) for t in range(self.n_tiles if names else 0))
-        return {k: (int(lo), int(hi)) for k, (lo, hi) in self._attrs["attribute_range"].items()}
+    def attribute_stats(self) -> dict[str, tuple]:
+        """``(least, largest, whole)`` of each numeric attribute in the input (``whole``: every
+        value a whole number; None, None, False for a float attribute with NaN or infinities):
+        recorded by the ingest (:func:`.ingest.value_stats`; since 2026-12-07, stop 66); for a
+        store made before (a run resumed), worked out once from the tiles' core points (every
+        input point once) — without them a resumed run's 8-bit colour in 16-bit fields would
+        be written ``v >> 8``, and a LAS output could not tell which values fit a LAS
+        dimension."""
+        if "attribute_stats" not in self._attrs:
+            names = [n for n, d in self.attribute_dtypes.items() if d.kind in "iuf"]
+            self._attrs["attribute_stats"] = merge_stats(
+                value_stats(self.attrs(t, names)) for t in range(self.n_tiles if names else 0))
+        return {k: tuple(v) for k, v in self._attrs["attribute_stats"].items()}
 
     @property
     def attribute_max(self) -> dict[str, int]:
-        """The largest value of each integer attribute in the input (:attr:`attribute_range`)."""
-        return {k: hi for k, (_, hi) in self.attribute_range.items()}
+        """The largest value of each integer attribute in the input (:attr:`attribute_stats`)."""
+        kinds = self.attribute_dtypes
+        return {k: int(hi) for k, (_, hi, _) in self.attribute_stats.items()
+                if kinds[k].kind in "iu"}
 
     @property
     def root_attrs(self) -> dict:
