@@ -58,8 +58,9 @@ def write_e57(path, scans):
         n = len(next(iter(fields.values())))
         buffers = libe57.VectorSourceDestBuffer()
         keep = []
-        for name, arr in fields.items():  # the values' own type (pye57's: colour as uint8)
-            arr = np.ascontiguousarray(arr, dtype=arr.dtype if arr.dtype.kind in "iu" else "d")
+        for name, arr in fields.items():  # as float64, converted by libE57Format (pye57's
+            # int64 buffers write zeros; integers are exact to 2**53)
+            arr = np.ascontiguousarray(arr, dtype="d")
             keep.append(arr)
             buffers.append(libe57.SourceDestBuffer(imf, name, arr, n, True, True))
         writer = points.writer(buffers)
@@ -183,7 +184,7 @@ def test_intensity_and_colour_reach_a_las_output(tmp_path):
                                     for m, v in (("Minimum", 0), ("Maximum", 255))}}},
         {"fields": {**cartesian(B), "intensity": ib}}])  # no limits: its bounds; no colour
     src = open_source(path, chunk_points=700)
-    assert src.attributes == ["intensity", "red", "green", "blue"]
+    assert list(src.attributes) == ["intensity", "red", "green", "blue"]
     ok = state == 0
     want = {"intensity": np.r_[np.rint(ia[ok] * (65535 / 2.0)),
                                np.rint((ib - ib.min()) * (65535 / (ib.max() - ib.min())))],
@@ -207,6 +208,56 @@ def test_intensity_and_colour_reach_a_las_output(tmp_path):
     assert set(np.flatnonzero(i >= ok.sum())) and not np.asarray(las.red)[i >= ok.sum()].any()
 
 
+def test_a_scans_other_fields_come_through(tmp_path):
+    """E57's other point fields reach the output: ``returnIndex`` / ``returnCount`` as LAS's
+    ``return_number`` (from 1) and ``number_of_returns``, ``rowIndex``, ``columnIndex`` and
+    ``timeStamp`` under their own names (extra bytes in a LAS output), typed by the widest
+    scan's bounds, 0 where a scan lacks the field (1 for its returns: one a point); their
+    values the input's at the kept points. They were dropped."""
+    from scipy.spatial import cKDTree
+    rng = np.random.default_rng(6)
+    A, B = rng.random((3000, 3)), rng.random((2000, 3)) + [0.0, 0.0, 1.5]
+    rows_a, cols_a = np.divmod(np.arange(3000), 60)
+    count_a = rng.integers(1, 4, 3000)
+    index_a = rng.integers(0, 3, 3000) % count_a
+    time_a = np.sort(rng.random(3000)) * 1e3
+    rows_b = np.arange(2000) * 100_000  # up to 2e8: int32
+    path = tmp_path / "fields.e57"
+    write_e57(path, [
+        {"fields": {**cartesian(A), "rowIndex": rows_a, "columnIndex": cols_a,
+                    "returnIndex": index_a, "returnCount": count_a, "timeStamp": time_a}},
+        {"fields": {**cartesian(B), "rowIndex": rows_b}}])
+    src = open_source(path, chunk_points=700)
+    assert src.attributes == {"return_number": np.int8, "number_of_returns": np.int8,
+                              "rowIndex": np.int32, "columnIndex": np.int8,
+                              "timeStamp": np.float64}
+    want = {"return_number": np.r_[index_a + 1, np.ones(2000)],
+            "number_of_returns": np.r_[count_a, np.ones(2000)],
+            "rowIndex": np.r_[rows_a, rows_b], "columnIndex": np.r_[cols_a, np.zeros(2000)],
+            "timeStamp": np.r_[time_a, np.zeros(2000)]}
+    chunks = list(src.chunks())
+    for name, values in want.items():
+        got = np.concatenate([a[name] for _, _, a in chunks])
+        assert got.dtype == src.attributes[name]
+        np.testing.assert_array_equal(got, values)
+    xyz = np.r_[A, B]
+    run_mod.run(path, tmp_path / "out.laz", ratio=0.3, tile_points=1500)
+    las = laspy.read(tmp_path / "out.laz")
+    assert list(las.point_format.extra_dimension_names)[:3] == [
+        "rowIndex", "columnIndex", "timeStamp"]
+    d, i = cKDTree(xyz).query(np.c_[las.x, las.y, las.z])
+    assert d.max() < float(np.linalg.norm(las.header.scales))
+    for name, values in want.items():
+        np.testing.assert_array_equal(np.asarray(las[name]), values[i], err_msg=name)
+    run_mod.run(path, tmp_path / "out.npy", ratio=0.3, tile_points=1500)
+    table = np.load(tmp_path / "out.npy")
+    assert table.dtype.names[3:8] == tuple(want)
+    d, i = cKDTree(xyz).query(np.c_[table["x"], table["y"], table["z"]])
+    assert d.max() == 0
+    for name, values in want.items():
+        np.testing.assert_array_equal(table[name], values[i], err_msg=name)
+
+
 def test_sixteen_bit_colour_is_read_whole(tmp_path):
     # pye57's own buffers hold colour as uint8: a scan of 16-bit colour overflowed them
     rng = np.random.default_rng(6)
@@ -220,7 +271,7 @@ def test_sixteen_bit_colour_is_read_whole(tmp_path):
                                                  for m, v in (("Minimum", 0),
                                                               ("Maximum", 65535))}}}])
     src = open_source(path, chunk_points=128)
-    assert src.attributes == ["red", "green", "blue"]
+    assert list(src.attributes) == ["red", "green", "blue"]
     got = list(src.chunks())
     for j, name in enumerate(("red", "green", "blue")):
         np.testing.assert_array_equal(np.concatenate([a[name] for _, _, a in got]), rgb[:, j])

@@ -171,7 +171,7 @@ def _parser():
         "simplify", help="simplify one cloud held in memory",
         description="Simplify one point cloud in memory, keeping and flagging sharp-edge "
                     "points. Output columns: the input's dimensions (LAS dimensions, PLY vertex "
-                    "properties, E57 intensity and colour; colour 8-bit), sharp_edge, "
+                    "properties, E57 point fields; colour 8-bit), sharp_edge, "
                     "importance (at removal; NaN for kept points), simplify_rank (removal "
                     "order; -1 for kept), nx, ny, nz.")
     s.add_argument("input", help="LAS/LAZ (file, folder or glob), E57, PLY, OBJ/OFF/STL "

@@ -12,9 +12,14 @@ Read through ``pye57`` (libE57Format), an optional dependency: ``pip install
 'tiledsimplify[e57]'``. Besides positions, intensity and colour (where a scan has them) are
 carried as the LAS dimensions ``intensity`` and ``red``/``green``/``blue``, 16-bit, scaled from
 the range the scan declares (``intensityLimits``, ``colorLimits``, else its fields' bounds): a
-LAS/LAZ output of an E57 input is LAS 1.4 point format 6, or 7 with colour.
+LAS/LAZ output of an E57 input is LAS 1.4 point format 6, or 7 with colour. The other point
+fields a scan has come through too (:data:`OTHER`): ``returnIndex`` and ``returnCount`` as
+LAS's ``return_number`` (from 1) and ``number_of_returns``, ``rowIndex``, ``columnIndex``,
+``timeStamp`` and the ``is…Invalid`` flags under their own names (extra bytes in a LAS
+output, :func:`.las_output.carried_layout`).
 """
 
+import functools
 import glob
 import os
 from pathlib import Path
@@ -22,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileFormatError, InputError
+from .las_output import NEW_POINT_DEFAULTS
 from .sources import check_finite, to_uint16
 
 CARTESIAN = ("cartesianX", "cartesianY", "cartesianZ")
@@ -33,6 +39,15 @@ KEPT = {"intensity": ("intensity", "intensityLimits", "intensityMinimum", "inten
         "green": ("colorGreen", "colorLimits", "colorGreenMinimum", "colorGreenMaximum"),
         "blue": ("colorBlue", "colorLimits", "colorBlueMinimum", "colorBlueMaximum")}
 COLOURS = ("red", "green", "blue")
+#: E57's other point fields (ASTM E2807 §8.4.4), carried under their own names: LAS name ->
+#: (E57 field, value added, type or None: the smallest signed integer its prototype's bounds
+#: fit); returnIndex counts from 0, LAS's return_number from 1
+OTHER = {"return_number": ("returnIndex", 1, None), "number_of_returns": ("returnCount", 0, None),
+         "rowIndex": ("rowIndex", 0, None), "columnIndex": ("columnIndex", 0, None),
+         "timeStamp": ("timeStamp", 0, np.dtype(np.float64)),
+         "isTimeStampInvalid": ("isTimeStampInvalid", 0, np.dtype(np.uint8)),
+         "isIntensityInvalid": ("isIntensityInvalid", 0, np.dtype(np.uint8)),
+         "isColorInvalid": ("isColorInvalid", 0, np.dtype(np.uint8))}
 
 
 def _pye57(path):
@@ -99,9 +114,24 @@ def _field_range(lib, scan_node, proto, field, group, lo_key, hi_key):
     return None
 
 
+def _integer_type(lib, proto, field, added):
+    """The smallest signed integer type (int8 .. int64) that holds an integer field's values
+    plus ``added``, by the bounds its prototype declares; int64 if it declares none."""
+    node = proto.get(field)
+    if node.type() == lib.NodeType.E57_INTEGER:
+        t = lib.IntegerNode(node)
+        lo, hi = int(t.minimum()) + added, int(t.maximum()) + added
+        for dtype in (np.int8, np.int16, np.int32):
+            info = np.iinfo(dtype)
+            if info.min <= lo and hi <= info.max:
+                return np.dtype(dtype)
+    return np.dtype(np.int64)
+
+
 class _Scan:
     """One scan's layout: index, point count, coordinate fields, invalid-state field, pose,
-    and the fields kept as LAS dimensions with their ranges."""
+    the fields kept as LAS dimensions with their ranges, and the other fields carried
+    (:data:`OTHER`) with their types."""
 
     def __init__(self, header, index, path, lib):
         self.index = index
@@ -125,6 +155,11 @@ class _Scan:
                                     or all(KEPT[c][0] in fields for c in COLOURS)):
                 self.kept[name] = (field, _field_range(lib, header.node, proto, field, group,
                                                        lo_key, hi_key))
+        self.other = {}  # name -> (E57 field, value added, type)
+        for name, (field, added, dtype) in OTHER.items():
+            if field in fields:
+                self.other[name] = (field, added,
+                                    dtype or _integer_type(lib, proto, field, added))
         self.rotation, self.translation = np.eye(3), np.zeros(3)
         node = header.node
         if node.isDefined("pose"):
@@ -191,9 +226,16 @@ class E57Source:
                     raise self._bad(path, exc) from None
                 self._scans.append(scans)
                 self._valid.append([self._count_valid(f, path, s) for s in scans])
-        #: the LAS dimensions every chunk carries (0 where a scan lacks the field)
-        self.attributes = [name for name in KEPT
-                           if any(name in s.kept for scans in self._scans for s in scans)]
+        every = [s for scans in self._scans for s in scans]
+        #: the dimensions every chunk carries and their types (where a scan lacks the field 0,
+        #: or 1 for its returns): the LAS ones (16-bit), then the other fields (the widest
+        #: type of any scan)
+        self.attributes = {name: np.dtype(np.uint16) for name in KEPT
+                           if any(name in s.kept for s in every)}
+        for name in OTHER:
+            types = [s.other[name][2] for s in every if name in s.other]
+            if types:
+                self.attributes[name] = functools.reduce(np.promote_types, types)
 
     @staticmethod
     def _bad(path, exc):
@@ -251,7 +293,7 @@ class E57Source:
     def chunks(self):
         """``(start, xyz, attrs)`` chunks: ``start`` the first point's position among the
         valid points of all the files, file after file and scan after scan; ``attrs`` the LAS
-        dimensions of :attr:`attributes` (uint16)."""
+        dimensions of :attr:`attributes`, each of its type."""
         start = 0
         for path, scans in zip(self.files, self._scans):
             with self._open(path) as f:
@@ -263,6 +305,7 @@ class E57Source:
     def _scan_chunks(self, f, path, scan):
         """``(xyz, attrs)`` of a scan's valid points, chunk by chunk, in the file's frame."""
         extra = [field for field, _ in scan.kept.values()]
+        extra += [field for field, _, _ in scan.other.values()]
         fields = list(scan.coords) + extra + ([scan.state] if scan.state else [])
         for c in self._read(f, path, scan, fields):
             ok = c[scan.state] == 0 if scan.state is not None else slice(None)
@@ -270,12 +313,15 @@ class E57Source:
             if not len(a):
                 continue
             attrs = {}
-            for name in self.attributes:
+            for name, dtype in self.attributes.items():
                 if name in scan.kept:
                     field, span = scan.kept[name]
                     attrs[name] = to_uint16(c[field][ok], span)
-                else:
-                    attrs[name] = np.zeros(len(a), dtype=np.uint16)
+                elif name in scan.other:  # read as float64: integers exact to 2**53
+                    field, added, _ = scan.other[name]
+                    attrs[name] = (c[field][ok] + added).astype(dtype)
+                else:  # a scan without the field: one return per point, else 0
+                    attrs[name] = np.full(len(a), NEW_POINT_DEFAULTS.get(name, 0), dtype=dtype)
             if scan.coords is SPHERICAL:
                 xyz = spherical_to_cartesian(a, b, d)
             else:

@@ -155,7 +155,7 @@ def _fits(dim, dtype, stats):
 def carried_layout(attributes, point_format, reserved=(), stats=None):
     """Where a LAS output of a non-LAS input puts each dimension the input carried
     (``attributes``: name -> ``(dtype, trailing shape)``, PLY properties, text columns, E57
-    intensity and colour), nothing dropped.
+    point fields), nothing dropped.
 
     A dimension named as one of ``point_format``'s standard dimensions — in any case, with or
     without ``_`` and spaces, as PDAL (``Classification``, ``NumberOfReturns``) and

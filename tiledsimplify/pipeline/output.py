@@ -33,7 +33,7 @@ RESERVED = frozenset(OUTPUT_COLUMNS) | {"importance", "simplify_rank"}
 
 def carried(ts):
     """What a non-LAS output carries of the input's dimensions (LAS dimensions, PLY
-    properties, E57 intensity and colour): ``(columns' dtypes, the largest colour value or
+    properties, E57 point fields): ``(columns' dtypes, the largest colour value or
     None)`` — colour is written 8-bit (:func:`~tiledsimplify.io.points_out.colour_8bit`)."""
     spec = {name: (np.dtype(v["dtype"]), tuple(v["shape"]))
             for name, v in ts.root_attrs["attributes"].items()}
