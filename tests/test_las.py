@@ -886,3 +886,24 @@ def test_a_non_las_inputs_dimensions_find_a_place_in_a_las_output():
                     "scan_angle": ("Scan Angle", None), "gps_time": ("GpsTime", None),
                     "Withheld_float64": ("Withheld", None),
                     "Overlap_float64": ("Overlap", None)}
+
+
+def test_a_layout_las_cannot_describe_is_refused_before_the_work(tmp_path):
+    """:func:`output_header` (what a run checks before the work): a template of 340
+    extra-bytes dimensions plus the simplifier's 3 is more than the 341 a LAS file's Extra
+    Bytes VLR describes; laspy took the header and failed only when the file was written."""
+    from tiledsimplify.io.las_output import EXTRA_BYTES_MAX, output_header
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.add_extra_dims([laspy.ExtraBytesParams(name=f"f{i}", type=np.uint8)
+                           for i in range(EXTRA_BYTES_MAX - 1)])
+    with pytest.raises(InputError, match=r"big\.laz: a LAS file describes at most 341 "
+                                         r"extra-bytes dimensions.*would need 343"):
+        output_header(header, path=tmp_path / "big.laz")
+    fewer = laspy.LasHeader(point_format=6, version="1.4")
+    fewer.add_extra_dims([laspy.ExtraBytesParams(name=f"f{i}", type=np.uint8)
+                          for i in range(EXTRA_BYTES_MAX - 3)])
+    out, _ = output_header(fewer)  # 341 described: written and read back
+    write_las(tmp_path / "ok.las", out, np.zeros((2, 3)),
+              {n: np.zeros(2, np.uint8) for n in out.point_format.dimension_names
+               if n not in ("X", "Y", "Z")}, extra_dims=())
+    assert len(list(laspy.read(tmp_path / "ok.las").point_format.extra_dimension_names)) == 341

@@ -886,6 +886,32 @@ def test_integers_a_las_dimension_cannot_hold_keep_their_own_type(tmp_path):
     assert not np.asarray(las.classification).any()
 
 
+def test_more_dimensions_than_las_holds_are_refused_before_the_tiles(tmp_path, caplog):
+    """A structured NPY of 400 float32 features (an ML pipeline's) to LAZ: a LAS file
+    describes at most 341 extra-bytes dimensions (its Extra Bytes VLR holds 65,535 bytes),
+    and laspy failed only when writing the file, after every tile. Now the run stops after
+    the ingest, naming the output and the fix, before any tile runs; a .npy output takes
+    them all."""
+    import logging
+    rng = np.random.default_rng(8)
+    n = 3000
+    t = np.zeros(n, dtype=[("x", "f8"), ("y", "f8"), ("z", "f8")]
+                 + [(f"feature_{i}", "f4") for i in range(400)])
+    t["x"], t["y"] = rng.random(n), rng.random(n)
+    for i in range(400):
+        t[f"feature_{i}"] = i
+    np.save(tmp_path / "in.npy", t)
+    caplog.set_level(logging.INFO, logger="tiledsimplify")
+    with pytest.raises(InputError, match=r"out\.laz: a LAS file describes at most 341 "
+                                         r"extra-bytes dimensions.*would need 403"):
+        run(tmp_path / "in.npy", tmp_path / "out.laz", ratio=0.2, tile_points=1000)
+    assert not (tmp_path / "out.laz").exists()
+    assert not any(" removals (up to level" in r.getMessage() for r in caplog.records)
+    run(tmp_path / "in.npy", tmp_path / "out.npy", ratio=0.2, tile_points=1000)
+    out = np.load(tmp_path / "out.npy")
+    assert out.dtype.names[3:403] == t.dtype.names[3:] and (out["feature_399"] == 399).all()
+
+
 def test_cli_run_with_config(bunny, tmp_path, caplog):
     X, path = bunny
     cfg = tmp_path / "c.toml"

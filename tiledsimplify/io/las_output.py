@@ -116,6 +116,11 @@ def new_header(lo, hi, spacing, colour=False) -> laspy.LasHeader:
 
 #: LAS's extra-bytes name field, in bytes
 _NAME_BYTES = 32
+#: the most extra-bytes dimensions a LAS file describes: its Extra Bytes VLR (192 bytes a
+#: dimension) holds at most 65,535 bytes
+EXTRA_BYTES_MAX = 65_535 // 192
+#: the longest point record LAS holds, in bytes
+RECORD_MAX = 65_535
 
 
 def _key(name):
@@ -230,8 +235,9 @@ def output_header(template_header: laspy.LasHeader, extra_dims=SIMPLIFY_DIMS, pa
     Raises
     ------
     InputError
-        Repeated names, or an added dimension that clashes with a standard dimension or with
-        an extra dimension of another type.
+        Repeated names, an added dimension that clashes with a standard dimension or with an
+        extra dimension of another type, or more extra-bytes dimensions than a LAS file holds
+        (:data:`EXTRA_BYTES_MAX`; laspy would fail only when the file is written).
     """
     header = copy.deepcopy(template_header)
     params = [_as_params(d) for d in extra_dims]
@@ -251,6 +257,15 @@ def output_header(template_header: laspy.LasHeader, extra_dims=SIMPLIFY_DIMS, pa
                 f"dimension of that name of type {dim.dtype}; rename the added dimension.")
     if new:
         header.add_extra_dims(new)
+    described = len(list(header.point_format.extra_dimension_names))
+    if described > EXTRA_BYTES_MAX or header.point_format.size > RECORD_MAX:
+        raise InputError(
+            f"{path or 'the output'}: a LAS file describes at most {EXTRA_BYTES_MAX} "
+            f"extra-bytes dimensions in a point record of at most {RECORD_MAX:,} bytes, and "
+            f"this one would need {described} ({header.point_format.size:,} bytes: the "
+            f"input's dimensions and the {len(names)} the simplifier adds). Write .ply or "
+            ".npy, which take any number of columns, or leave dimensions out of the input "
+            "first.")
     return header, names
 
 

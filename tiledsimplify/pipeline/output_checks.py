@@ -99,7 +99,12 @@ def check_grid(output, source, ts):
     """After the ingest, before the tiles: refuse a LAS/LAZ output whose grid (the first
     file's scales and offsets) cannot hold the input's coordinates — files far apart with
     their own offsets. The bounds are those the ingest read from the points (headers' bounds
-    may be wrong or zero)."""
+    may be wrong or zero). For a non-LAS input, whose dimensions are known only now, refuse
+    a layout LAS cannot hold (:func:`.las_output.output_header`: too many dimensions)."""
+    if output.suffix.lower() in LAS_SUFFIXES and not source.is_las:
+        from ..io.las_output import output_header
+        from .output import new_las_header
+        output_header(new_las_header(ts)[0], path=output)
     if output.suffix.lower() in LAS_SUFFIXES and source.is_las:
         from ..io.las_pieces import fits_grid, off_grid
         lo, hi = ts.root_attrs["bounds"]
