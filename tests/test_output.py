@@ -437,7 +437,7 @@ def test_text_rows_give_every_value_back(monkeypatch):
     n = 40
     table = np.zeros(n, dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("red", "u1"),
                                ("i", "i4"), ("flag", "?"), ("nx", "f4"), ("t", "f8"),
-                               ("id", "u8")])
+                               ("id", "u8"), ("intensity", "f8")])
     for name in ("x", "y", "t"):
         table[name] = rng.normal(size=n) * 10.0 ** rng.integers(-8, 9, n)
     table["z"] = np.round(rng.random(n), 4)  # a LAS grid's
@@ -446,13 +446,26 @@ def test_text_rows_give_every_value_back(monkeypatch):
     table["t"][:4] = [0.0, -0.0, 1e300, 5e-324]
     table["nx"][:2] = [np.float32(0.3), np.finfo(np.float32).tiny]
     table["id"] = 2**64 - 1 - np.arange(n, dtype=np.uint64)
-    naive = {"f8": lambda v: repr(float(v)), "f4": lambda v: "%.9g" % float(v)}
+    table["intensity"] = rng.integers(0, 65536, n)  # a text file's integers, read as float64
+    table["intensity"][20] = 0.5  # one block not whole
+    table["intensity"][30] = -0.0
+
+    def naive(row, k, block):
+        v = row[k]
+        if table.dtype[k] == np.float32:
+            return "%.9g" % float(v)
+        if table.dtype[k] == np.float64:
+            whole = all(float(u).is_integer() and abs(u) < 2**53 and not (u == 0 and
+                        np.signbit(u)) for u in block[k])
+            return str(int(v)) if whole else repr(float(v))
+        return str(int(v))
+
     for sep in (",", " "):
         got = io.BytesIO()
         points_out._write_text(got, table, sep)
         lines = [sep.join(table.dtype.names)] + [
-            sep.join(naive.get(table.dtype[k].str[1:], lambda v: str(int(v)))(row[k])
-                     for k in table.dtype.names) for row in table]
+            sep.join(naive(row, k, table[i // 7 * 7:i // 7 * 7 + 7]) for k in table.dtype.names)
+            for i, row in enumerate(table)]
         assert got.getvalue().decode() == "\n".join(lines) + "\n"
         text = got.getvalue().decode().splitlines()[1:]
         for j, name in enumerate(table.dtype.names):
@@ -462,3 +475,6 @@ def test_text_rows_give_every_value_back(monkeypatch):
             np.testing.assert_array_equal(back, table[name], err_msg=name)
     assert "0.300000012" in text[0] and "0.30000001192" not in got.getvalue().decode()
     assert len(text[0].split(sep)[2]) <= 6  # the z of the LAS grid: 0.xxxx
+    intensity = [line.split(sep)[-1] for line in text]
+    assert "." not in "".join(intensity[:14]) and intensity[20] == "0.5"  # 123, not 123.0
+    assert intensity[30] == "-0.0" and "." in intensity[29]  # its block is not whole

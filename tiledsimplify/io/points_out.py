@@ -262,8 +262,9 @@ def _text_format(dtype):
     """How :func:`_write_text` writes a column of ``dtype``: integers (and bools) as
     integers, exactly (int64 and uint64 too); float64 by Python's ``repr``, the shortest text
     that gives the value back exactly (a LAS coordinate ``0.5396``, not ``%.17g``'s
-    ``0.53960000000000008``); float32 and float16 with the digits that give them back (the
-    normals: ``0.300000012``, not ``0.30000001192092896``)."""
+    ``0.53960000000000008``), as integers where a block's are whole (:func:`_whole`);
+    float32 and float16 with the digits that give them back (the normals: ``0.300000012``,
+    not ``0.30000001192092896``)."""
     if dtype.kind in "biu":
         return "%d"
     if dtype.kind == "f" and dtype.itemsize in _DIGITS:
@@ -279,11 +280,22 @@ def _write_text(fh, table, sep, header=True):
     names = table.dtype.names
     if header:
         fh.write((sep.join(names) + "\n").encode())
-    line = sep.join(_text_format(table.dtype[n]) for n in names) + "\n"
     for start in range(0, len(table), TEXT_BLOCK):
         block = table[start:start + TEXT_BLOCK]
+        line = sep.join(_whole(block[n], _text_format(table.dtype[n])) for n in names) + "\n"
         rows = zip(*(block[n].tolist() for n in names))
         fh.write("".join(map(line.__mod__, rows)).encode())
+
+
+def _whole(values, fmt):
+    """``%d`` for a float64 column whose values in this block are all whole numbers below
+    2**53 and not -0 (a text file's integer columns, read as float64: ``123``, not
+    ``123.0``), else ``fmt``."""
+    if fmt != "%r" or not values.size:
+        return fmt
+    with np.errstate(invalid="ignore"):
+        whole = bool((np.floor(values) == values).all() and (np.abs(values) < 2**53).all())
+    return "%d" if whole and not np.signbit(values[values == 0]).any() else fmt
 
 
 def publish(tmp, path):
