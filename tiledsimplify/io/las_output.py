@@ -173,7 +173,7 @@ def carried_layout(attributes, point_format, reserved=(), stats=None):
     other becomes an extra-bytes dimension of its own type (bool as uint8, float16 as
     float32), one per element of a trailing shape (``name_0``...), under its own name, or
     with its type added where that name is taken (PDAL ignores case): the Bunny PLY's float
-    ``intensity`` (0..1) is kept as ``intensity_float32``, LAS's 16-bit ``intensity`` left 0;
+    ``intensity`` (0..0.5) is kept as ``intensity_float32``, LAS's 16-bit ``intensity`` left 0;
     a number is added if that is taken too. Names in ``reserved`` are left out (the
     simplifier's own dimensions, which the output adds anew).
 

@@ -275,8 +275,9 @@ def _text_format(dtype):
 def _write_text(fh, table, sep, header=True):
     """``table``'s rows as text lines, each column as :func:`_text_format` says, formatted as
     Python numbers a block at a time (each column's own: no int64 goes through a float), not
-    as NumPy scalars row by row as ``np.savetxt`` did (200k rows of 5 columns: 0.52 against
-    0.79 s)."""
+    as NumPy scalars row by row as ``np.savetxt`` did (200k rows of x, y, z, an integer and
+    a float32, best of 3: 0.87 against 1.17 s for full-precision coordinates, 0.54 against
+    0.90 s for coordinates of four decimals)."""
     names = table.dtype.names
     if header:
         fh.write((sep.join(names) + "\n").encode())

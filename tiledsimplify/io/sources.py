@@ -685,9 +685,10 @@ def read_all(src):
 
 def read_all_dimensions(src):
     """Every point of an opened source and what it carries: ``(xyz, {name: (n, ...)
-    array})`` — a LAS file's dimensions, a PLY's vertex properties (:func:`ply_dimensions`),
-    an E57 file's intensity and colour (LAS names and types), nothing for the other
-    formats."""
+    array})`` — a LAS file's dimensions, a PLY's vertex properties and a structured NPY's
+    fields (:func:`ply_dimensions`), a text file's named columns (:func:`text_columns`), an
+    E57 file's point fields (:data:`.e57.OTHER`; intensity and colour with LAS names and
+    types); nothing for the other formats."""
     parts, dims = [], {}
     for _, xyz, attrs in src.chunks():
         parts.append(xyz)

@@ -35,11 +35,9 @@ def carried(ts):
     """What a non-LAS output carries of the input's dimensions (LAS dimensions, PLY
     properties, E57 point fields): ``(columns' dtypes, the largest colour value or
     None)`` — colour is written 8-bit (:func:`~tiledsimplify.io.points_out.colour_8bit`)."""
-    spec = {name: (np.dtype(v["dtype"]), tuple(v["shape"]))
-            for name, v in ts.root_attrs["attributes"].items()}
     top = ts.attribute_max
     colour = max((top[c] for c in COLOURS if c in top), default=None)
-    return attribute_dtypes(spec, RESERVED), colour
+    return attribute_dtypes(ts.attribute_spec, RESERVED), colour
 
 
 def new_las_header(ts):
@@ -50,9 +48,8 @@ def new_las_header(ts):
     lo, hi = ts.root_attrs["bounds"]
     header = new_header(lo, hi, ts.spacing,
                         colour=all(c in ts.attribute_names for c in COLOURS))
-    spec = {name: (np.dtype(v["dtype"]), tuple(v["shape"]))
-            for name, v in ts.root_attrs["attributes"].items()}
-    params, plan = carried_layout(spec, header.point_format, RESERVED, ts.attribute_stats)
+    params, plan = carried_layout(ts.attribute_spec, header.point_format, RESERVED,
+                                  ts.attribute_stats)
     if params:
         header.add_extra_dims(params)
     return header, plan

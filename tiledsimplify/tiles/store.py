@@ -529,7 +529,13 @@ class TileStore:
     @property
     def attribute_dtypes(self) -> dict[str, np.dtype]:
         """Dtype of each stored attribute."""
-        return {k: np.dtype(v["dtype"]) for k, v in self._attrs["attributes"].items()}
+        return {k: dt for k, (dt, _) in self.attribute_spec.items()}
+
+    @property
+    def attribute_spec(self) -> dict[str, tuple[np.dtype, tuple]]:
+        """Each stored attribute's ``(dtype, trailing shape)``."""
+        return {k: (np.dtype(v["dtype"]), tuple(v["shape"]))
+                for k, v in self._attrs["attributes"].items()}
 
     @property
     def attribute_stats(self) -> dict[str, tuple]:
@@ -745,8 +751,7 @@ class TileStore:
             return {n: self._read(t, f"attrs/{n}") for n in names}
         if not names:
             return {}
-        spec = {k: (v["dtype"], tuple(v["shape"])) for k, v in self._attrs["attributes"].items()}
-        layout, _ = attribute_layout(spec)
+        layout, _ = attribute_layout(self.attribute_spec)
         rec = self._read(t, "attributes")
         return {n: unpack_attribute(rec, layout[n]) for n in names}
 
