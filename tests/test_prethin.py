@@ -7,7 +7,6 @@ import pytest
 
 from tiledsimplify import SimplifyOptions, simplify_points
 from tiledsimplify.core import prethin
-from tiledsimplify.core.refine import protected
 from tiledsimplify.core.simplify import median_spacing, neighbourhoods
 from tiledsimplify.core.voronoi import scale_of
 from tiledsimplify.errors import InputError
@@ -100,7 +99,7 @@ def test_protected_points_are_thinned_boundary_points_are_not():
     X[:, 2] += np.where(X[:, 0] > 0, X[:, 0], 0.0)  # a crease along x = 0
     res = simplify_points(X, 0.1)
     k = len(X) - res.stats["n_prethin_subset"]
-    guarded = protected(res.deviation, res.threshold) & ~res.band
+    guarded = res.protected & ~res.band
     assert res.band.sum() > 0 and guarded.sum() > 0
     assert not res.band[res.order[:k]].any()
     assert guarded[res.order[:k]].any()

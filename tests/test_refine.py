@@ -360,19 +360,65 @@ def test_refine_option_validated():
 
 def test_refinement_keeps_strongly_non_planar_points_and_may_swap_weak_candidates(data_dir):
     """Fixed in the refinement: the flags' core band and kept points whose boundary measure is
-    above PROTECT x the threshold; kept candidates just above the threshold may be swapped
-    out."""
+    above PROTECT x the threshold (with a point below it near: see the next test); kept
+    candidates just above the threshold may be swapped out."""
     V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
     clean, _ = synthetic.scan(V, F, n_points=8000, seed=0)
     X, _ = synthetic.scan(V, F, n_points=8000, noise=0.1 * synthetic.spacing(clean), seed=0)
     res = simplify_points(X, ratio=0.2)
     greedy = simplify_points(X, ratio=0.2, options=SimplifyOptions(refine=False))
     assert res.stats["refine_swaps"] > 0
-    strong = greedy.keep & (greedy.deviation > PROTECT * res.threshold)
-    assert np.array_equal(strong, greedy.keep & protected(greedy.deviation, res.threshold))
+    strong = greedy.keep & greedy.protected
+    assert not (greedy.protected & (greedy.deviation <= PROTECT * res.threshold)).any()
     assert strong.sum() > 50
     assert res.keep[strong].all()
     assert res.keep[greedy.keep & greedy.band].all()
     weak = greedy.keep & ~strong & ~greedy.band & (greedy.deviation > res.threshold)
     assert (weak & ~res.keep).any()  # the old rule (every candidate fixed) would keep them all
     assert _hausdorff(X, res.keep) <= _hausdorff(X, greedy.keep)
+
+
+def _hops_to(start, cnt, pool, sources):
+    """Breadth-first steps along the lists from the nearest of ``sources`` (inf: none)."""
+    hops = np.full(cnt.size, np.inf)
+    hops[sources] = 0
+    frontier, d = list(np.flatnonzero(sources)), 0
+    while frontier:
+        d += 1
+        nxt = []
+        for i in frontier:
+            for j in pool[start[i]:start[i] + cnt[i]]:
+                if hops[j] == np.inf:
+                    hops[j] = d
+                    nxt.append(j)
+        frontier = nxt
+    return hops
+
+
+def test_a_point_protected_only_with_a_point_below_the_level_near():
+    """``protected``: above PROTECT x the threshold, and within PROTECT_HOPS steps of the lists
+    of a point that is not — against a breadth-first search, on a path and on the Voronoi
+    lists of a rough patch in a plane, where the patch's inside is not protected."""
+    from tiledsimplify.core import adjacency
+    from tiledsimplify.core.refine import PROTECT_HOPS
+    from tiledsimplify.core.simplify import neighbourhoods
+    assert PROTECT_HOPS == 2
+    path = np.array([(i, i + 1) for i in range(8)])
+    start, cnt, _, pool, _ = adjacency.from_edges(9, path)
+    deviation = np.array([0, 1, 1, 1, 1, 1, 0, 1, 1.0])
+    assert protected(deviation, 0.1, start, cnt, pool).tolist() == [
+        False, True, True, False, True, True, False, True, True]
+
+    rng = np.random.default_rng(3)
+    X = np.c_[rng.random((4000, 2)), np.zeros(4000)]
+    rough = np.linalg.norm(X[:, :2] - 0.5, axis=1) < 0.3
+    X[rough, 2] = 0.003 * rng.standard_normal(rough.sum())
+    st = neighbourhoods(X, 1.0, reach=0.1)
+    deviation = np.where(rough, 0.5 + rng.random(4000), 0.1 * rng.random(4000))
+    got = protected(deviation, 0.05, st.start, st.cnt, st.pool)
+    above = deviation > PROTECT * 0.05
+    hops = _hops_to(st.start, st.cnt, st.pool, ~above)
+    assert np.array_equal(got, above & (hops <= PROTECT_HOPS))
+    assert np.array_equal(above, rough)
+    inside = np.linalg.norm(X[:, :2] - 0.5, axis=1) < 0.15  # 9 spacings from its rim
+    assert got.sum() > 100 and not got[inside].any() and inside.sum() > 200

@@ -125,6 +125,22 @@ def to_sets(start, cnt, pool, alive=None):
     return out
 
 
+@jit
+def grow(mask, start, cnt, pool):
+    """``mask`` grown by one step of the lists: true at every point that is in ``mask`` or
+    lists a point that is (a new array)."""
+    out = mask.copy()
+    for i in range(mask.size):
+        if out[i]:
+            continue
+        s = start[i]
+        for j in range(cnt[i]):
+            if mask[pool[s + j]]:
+                out[i] = True
+                break
+    return out
+
+
 @jit_leaf
 def contains(start, cnt, pool, i, j):
     """True if ``j`` is in the list of ``i``."""

@@ -40,6 +40,10 @@ class SimplifyResult:
         point): sampled first for the sure points, and never swapped out by the gap
         refinement once kept (:func:`tiledsimplify.core.refine.edge_cover_radius`;
         :mod:`tiledsimplify.core.edge_fit`, step 4).
+    protected : bool (n,)
+        The points the gap refinement never swaps out for their boundary measure once kept
+        (:func:`tiledsimplify.core.refine.protected`: well above the threshold, with a point
+        that is not within two steps of the Voronoi lists).
     normals : float64 (n, 3)
         Unit normals of the input points (estimated on the full input).
     rank : int64 (n,)
@@ -71,6 +75,7 @@ class SimplifyResult:
     stats: dict = field(default_factory=dict)
     band: np.ndarray | None = None
     features: np.ndarray | None = None
+    protected: np.ndarray | None = None
 
     @property
     def n(self):

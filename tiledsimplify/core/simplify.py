@@ -631,7 +631,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     normals_u = st.initial_normals
     # never swapped out by the refinement: a point of the band the cut kept stays, sure or not;
     # the other flagged points may go, sure or not
-    fixed_u = frozen[rep] | band_u | protected(deviation_u, threshold)
+    protected_u = protected(deviation_u, threshold, st.start, st.cnt, st.pool)
+    fixed_u = frozen[rep] | band_u | protected_u
 
     # 4b. beyond the paper: thin the smooth points to a multiple of the target first
     thinned = np.zeros(0, dtype=np.int64)
@@ -756,4 +757,4 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         keep=keep, boundary=boundary, normals=normals_u[inverse], rank=rank,
         importance=importance, deviation=deviation_u[inverse], threshold=threshold,
         order=order, order_importance=order_importance, target=target, message=message,
-        stats=stats, band=band, features=features)
+        stats=stats, band=band, features=features, protected=protected_u[inverse])

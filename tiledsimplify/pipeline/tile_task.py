@@ -15,7 +15,6 @@ import warnings
 import numpy as np
 
 from ..core import SimplifyOptions, compile_cache, simplify_points
-from ..core.refine import protected
 from ..core.simplify import Neighbourhoods, neighbourhood_state
 from ..errors import BudgetWarning, InputError
 from ..tiles import TileStore
@@ -168,9 +167,9 @@ def simplify_tile(store_path, tile, options, threshold, depth, share=None):
     (:attr:`~tiledsimplify.core.result.SimplifyResult.features`: what the gap refinement keeps
     within its edge cover radius of a kept point), ``fixed`` (the features' core band,
     :attr:`~tiledsimplify.core.result.SimplifyResult.band`, and the points whose boundary
-    measure is above :data:`~tiledsimplify.core.refine.PROTECT` times the threshold,
-    :func:`~tiledsimplify.core.refine.protected`: points the gap refinement keeps where the cut
-    does, as the untiled core does), ``normal``; the
+    measure is above :data:`~tiledsimplify.core.refine.PROTECT` times the threshold, with a
+    point that is not within two steps, :func:`~tiledsimplify.core.refine.protected`: points
+    the gap refinement keeps where the cut does, as the untiled core does), ``normal``; the
     result attributes ``exhausted``, ``steps`` and ``depth`` tell the global cut how far the
     sequence is known.
     """
@@ -226,7 +225,7 @@ def simplify_tile(store_path, tile, options, threshold, depth, share=None):
         imp[res.order[core]] = at[core]
         boundary = res.boundary[:n_core]
         feature = res.features[:n_core]
-        fixed = res.band[:n_core] | protected(res.deviation[:n_core], res.threshold)
+        fixed = res.band[:n_core] | res.protected[:n_core]
         normal = res.normals[:n_core].astype(NORMAL_DTYPE)
     store.write_result(tile, {"step": step, "importance": imp, "boundary": boundary,
                               "feature": feature, "fixed": fixed, "normal": normal}, overwrite=True,
