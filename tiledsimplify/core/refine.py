@@ -66,15 +66,16 @@ from .bounds import box
 #: CGAL's 3.23) and coverage -2.5 % (counter scan 0.417 -> 0.353); 4x: between the two.
 PROTECT = 3.0
 #: ... unless every point within this many steps of the Voronoi lists is above that level too:
-#: such a point stands out from nothing around it (the whole of a thin-walled part whose every
-#: two-ring crosses its walls, a stretch of rough rock). On cycloidal, a gear 20k points
-#: thin, 83.5 % of the points were above it, 87 % of the kept count was protected and the
-#: refinement could move the rest only. Measured on the 39 quality cases (ours only, against
-#: protecting all, docs/measurements.md): 2 — cycloidal's mean error 44.89 -> 43.40 (below
-#: every peer's: MeshLab's Poisson disk 44.45), edge coverage 0.712 -> 0.729, Hausdorff -5.4 %;
-#: Autzen's mean error +1.6 %, Hausdorff -2.9 %; the other 37 within 1 %. 1: also cycloidal's
-#: mean error won (43.74), but mean error +0.7 % in geometric mean (up to +3.6 % on scans);
-#: 3: cycloidal 44.83, lost.
+#: such a point stands out from nothing around it (the inside of a thin-walled stack whose
+#: two-rings all cross its walls, a stretch of rough rock). On cycloidal (a cycloidal drive's
+#: stack of thin discs, 20k points) 83.5 % of the points were above it and 90 % of the kept
+#: count fixed: the refinement could move a tenth. Measured on the 39 quality cases (ours
+#: only, against protecting all; docs/measurements.md "Protected only beside a point below
+#: the level"): 2 — cycloidal's mean error 44.89 -> 43.40 (below every peer's: MeshLab's
+#: Poisson disk 44.45), edge coverage 0.712 -> 0.729, Hausdorff -5.4 %; Autzen's mean error
+#: +1.6 %, Hausdorff -2.9 %; the other 37 within 1 %. 1: cycloidal's mean error won too
+#: (43.74), but mean error +0.7 % in geometric mean (up to +3.6 % on scans); 3: cycloidal
+#: 44.83, lost.
 PROTECT_HOPS = 2
 
 #: flagged points (sharp-edge flags) the refinement brings and keeps within
