@@ -192,16 +192,20 @@ def test_tiled_run_exact_count_and_agrees_with_untiled(bunny, tmp_path):
     # run wherever the halo covers the neighbourhoods (all but a few points)
     untiled = simplify_points(X, ratio=0.2, options={"boundary_threshold": s.threshold,
                                                      "spacing": s.spacing})
-    agree = n = 0
+    # and so do the points the refinement keeps fixed (the band and the protected points)
+    agree = same_fixed = n = 0
+    fixed_untiled = untiled.band | untiled.protected
     for i in range(ts.n_tiles):
         _, gi = ts.core(i)
         b = ts.read_result(i, "boundary")
         agree += int((b == untiled.boundary[gi]).sum())
+        same_fixed += int((ts.read_result(i, "fixed") == fixed_untiled[gi]).sum())
         n += len(gi)
         nrm = ts.read_result(i, "normal")
         cos = np.abs(np.sum(nrm * untiled.normals[gi], axis=1))
         assert np.median(cos) > 0.9999
-    assert agree / n > 0.99
+    assert agree / n > 0.99 and same_fixed / n > 0.99
+    assert untiled.protected.sum() > 0
     assert s.threshold == edge_fit.CANDIDATE
 
 
