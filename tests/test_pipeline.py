@@ -810,6 +810,52 @@ def test_las_output_of_a_non_las_input(bunny, tmp_path, suffix):
     assert (np.asarray(las["simplify_rank"]) == -1).all()
 
 
+def test_a_text_inputs_whole_columns_are_written_as_integers(tmp_path):
+    """A text file's columns are read as float64 (their type is a guess); a PLY or NPY output
+    writes one whose values are all whole numbers as the smallest integer type that holds
+    them (``Classification`` 0..19 as uint8, ``Label`` -5..299 as int16), the tiled run and
+    the in-memory ``simplify`` alike, each value the input's; one beyond int32 (``Big``) or
+    with a fraction (``Deviation``) stays float64, and so does an ASCII PLY's declared double
+    property of whole numbers. They were all float64 before."""
+    from scipy.spatial import cKDTree
+    from tiledsimplify.io.points_out import whole_type
+    from tiledsimplify.io.sources import read_ply_vertices
+    assert [whole_type(*r) for r in [(0, 255), (-1, 127), (0, 256), (-129, 0), (0, 2**32 - 1),
+                                     (-1, 2**31 - 1), (0, 2**32)]] == [
+        np.uint8, np.int8, np.uint16, np.int16, np.uint32, np.int32, None]
+    rng = np.random.default_rng(7)
+    n = 4000
+    xyz = np.round(np.c_[rng.random((n, 2)), 0.2 * np.abs(rng.random(n) - 0.5)], 6)
+    cols = {"Classification": rng.integers(0, 20, n), "Label": rng.integers(-5, 300, n),
+            "Big": rng.integers(0, 5_000_000_000, n), "Deviation": np.round(rng.normal(size=n), 4)}
+    cols["Label"][:2] = -5, 299
+    path = tmp_path / "cc.txt"
+    path.write_text("//X,Y,Z," + ",".join(cols) + "\n" + "".join(
+        "%.6f,%.6f,%.6f,%d,%d,%d,%.4f\n" % (*p, *v) for p, *v in zip(xyz, *cols.values())))
+    want = {"Classification": np.uint8, "Label": np.int16, "Big": np.float64,
+            "Deviation": np.float64}
+    outputs = [tmp_path / "run.ply", tmp_path / "run.npy", tmp_path / "mem.npy"]
+    run(path, outputs[0], ratio=0.2, tile_points=1500)
+    run(path, outputs[1], ratio=0.2, tile_points=1500)
+    assert main(["simplify", str(path), str(outputs[2]), "--ratio", "0.2", "-q"]) == EXIT_OK
+    tree = cKDTree(xyz)
+    for out in outputs:
+        table = read_ply_vertices(out) if out.suffix == ".ply" else np.load(out)
+        d, rows = tree.query(np.c_[table["x"], table["y"], table["z"]])
+        assert d.max() == 0 and len(table) == 800, out
+        for name, dtype in want.items():
+            assert table.dtype[name] == dtype, (out, name)
+            np.testing.assert_array_equal(table[name], cols[name][rows])
+    # an ASCII PLY's double property holds whole numbers: its declared type stays
+    ply = tmp_path / "declared.ply"
+    ply.write_text("ply\nformat ascii 1.0\nelement vertex %d\nproperty double x\nproperty "
+                   "double y\nproperty double z\nproperty double Classification\nend_header"
+                   "\n" % n + "".join("%.6f %.6f %.6f %d\n" % (*p, c)
+                                      for p, c in zip(xyz, cols["Classification"])))
+    run(ply, tmp_path / "declared.npy", ratio=0.2, tile_points=1500)
+    assert np.load(tmp_path / "declared.npy").dtype["Classification"] == np.float64
+
+
 def test_a_las_output_keeps_every_column_of_a_text_input(tmp_path, cluster):
     """A text file's columns reach a LAS output (:func:`.las_output.carried_layout`): its
     colour as LAS colour (point format 7); its ``Intensity`` and ``Classification`` columns

@@ -33,6 +33,7 @@ from .io.points_out import (
     check_output,
     check_writable,
     largest_colour,
+    whole_columns,
     write_json,
     write_points,
 )
@@ -525,6 +526,8 @@ def _simplify(args):
              st["seconds_removal"], st["n_boundary"], res.threshold)
     sel = np.ones(res.n, bool) if args.all_points else res.keep
     own = ("sharp_edge", "importance", "simplify_rank", "nx", "ny", "nz")
+    # a text file's columns of whole numbers as integers, as a tiled run writes them
+    dims = whole_columns(dims, getattr(source, "guessed", ()))
     columns = {  # the input's dimensions first (colour 8-bit), then the simplifier's
         **attribute_columns({name: v[sel] for name, v in dims.items()}, largest_colour(dims),
                             own),

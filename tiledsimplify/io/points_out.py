@@ -90,6 +90,43 @@ def _attribute_names(name, trail):
     return [name] if not tuple(trail) else [f"{name}_{i}" for i in range(size)]
 
 
+#: the integer types a column typed by guess (a text file's, read as float64) whose values
+#: are all whole numbers is written as, the first that holds them: PLY has no 64-bit integers,
+#: so a column beyond int32 stays float64
+WHOLE_TYPES = tuple(np.dtype(t) for t in ("u1", "i1", "u2", "i2", "u4", "i4"))
+
+
+def whole_type(lo, hi):
+    """The first of :data:`WHOLE_TYPES` that holds ``lo .. hi`` (whole numbers), or None."""
+    for t in WHOLE_TYPES:
+        info = np.iinfo(t)
+        if info.min <= lo and hi <= info.max:
+            return t
+    return None
+
+
+def whole_dtypes(dtypes, stats, guessed):
+    """``dtypes`` (column -> dtype) with each float column named in ``guessed`` (the input's
+    columns typed by guess, ``TextSource.guessed``) whose values are all whole numbers as
+    :func:`whole_type` of its range. ``stats``: name -> ``(least, largest, whole)`` over the
+    whole input (:attr:`~tiledsimplify.tiles.store.TileStore.attribute_stats`)."""
+    out = dict(dtypes)
+    for name in guessed:
+        lo, hi, whole = stats.get(name, (None, None, False))
+        if name in out and out[name].kind == "f" and whole and lo is not None:
+            out[name] = whole_type(lo, hi) or out[name]
+    return out
+
+
+def whole_columns(columns, guessed):
+    """``columns`` (name -> (n,) array) with :func:`whole_dtypes`' types, from the values."""
+    stats = {name: (float(v.min()), float(v.max()), bool((np.floor(v) == v).all()))
+             for name, v in columns.items()
+             if name in guessed and v.dtype.kind == "f" and v.size and np.isfinite(v).all()}
+    types = whole_dtypes({name: v.dtype for name, v in columns.items()}, stats, guessed)
+    return {name: v.astype(types[name], copy=False) for name, v in columns.items()}
+
+
 def attribute_dtypes(spec, reserved=()):
     """The columns (name -> dtype) a points file gets from the input's per-point attributes,
     given as ``{name: (dtype, trailing shape)}``: the columns :func:`attribute_columns` makes.

@@ -240,12 +240,15 @@ class TextSource:
     opened the file, :func:`_scan_lines` or :func:`_scan_points`), so a part starts reading
     there; ``lines[k]``: that line's index in the file (0 = the first line), and one more
     entry, the line after the last point (default: ``skip_lines + k * chunk_points``, a file
-    without blank or comment lines)."""
+    without blank or comment lines). ``guessed``: the dimensions whose type was guessed (a
+    text file's columns, read as float64; not an ASCII PLY's declared ones), which outputs
+    write as integers where all their values are whole numbers
+    (:func:`.points_out.whole_dtypes`)."""
 
     is_las = False
 
     def __init__(self, path, chunk_points, *, skip_lines, count, delimiter, offsets,
-                 dims=None, lines=None, xyz=(0, 1, 2)):
+                 dims=None, lines=None, xyz=(0, 1, 2), guessed=()):
         self.files = [Path(path)]
         self.chunk_points = int(chunk_points)
         self._skip = skip_lines
@@ -258,6 +261,7 @@ class TextSource:
         self._lines = list(lines)  # and, last, the line after the last point
         self._dims = dims  # ((column, dimension, type, is colour), ...): text_columns
         self._xyz = tuple(xyz)  # the columns of x, y, z
+        self.guessed = tuple(guessed)
 
     @property
     def count(self):
@@ -652,7 +656,9 @@ def open_source(spec, chunk_points=1_000_000):
     if suffix in TEXT_SUFFIXES:
         skip, count, delimiter, offsets, lines, (xyz, dims) = _text_layout(p, chunk_points)
         return TextSource(p, chunk_points, skip_lines=skip, count=count, delimiter=delimiter,
-                          offsets=offsets, lines=lines, dims=dims, xyz=xyz)
+                          offsets=offsets, lines=lines, dims=dims, xyz=xyz,
+                          guessed=[dim for _, dim, code, colour in dims or ()
+                                   if code == "f8" and not colour])
     if suffix == ".npy":
         arr = _load_npy(p)
         mapped = None

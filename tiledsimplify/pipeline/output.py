@@ -11,7 +11,8 @@ import numpy as np
 
 from ..errors import TiledSimplifyError
 from ..io.las import LAS_SUFFIXES
-from ..io.points_out import COLOURS, PointsAt, attribute_columns, attribute_dtypes
+from ..io.points_out import (COLOURS, PointsAt, attribute_columns, attribute_dtypes,
+                             whole_dtypes)
 from ..tiles import TileStore
 from .budget import kept_in_tile
 from .input_order import InputRanks
@@ -31,13 +32,16 @@ OUTPUT_COLUMNS = {"sharp_edge": np.uint8, "nx": NORMAL_DTYPE, "ny": NORMAL_DTYPE
 RESERVED = frozenset(OUTPUT_COLUMNS) | {"importance", "simplify_rank"}
 
 
-def carried(ts):
+def carried(ts, guessed=()):
     """What a non-LAS output carries of the input's dimensions (LAS dimensions, PLY
-    properties, E57 point fields): ``(columns' dtypes, the largest colour value or
-    None)`` — colour is written 8-bit (:func:`~tiledsimplify.io.points_out.colour_8bit`)."""
+    properties, E57 point fields, text columns): ``(columns' dtypes, the largest colour value
+    or None)`` — colour is written 8-bit (:func:`~tiledsimplify.io.points_out.colour_8bit`),
+    and the columns named in ``guessed`` (typed by guess: a text file's) as integers where all
+    their values are whole numbers (:func:`~tiledsimplify.io.points_out.whole_dtypes`)."""
     top = ts.attribute_max
     colour = max((top[c] for c in COLOURS if c in top), default=None)
-    return attribute_dtypes(ts.attribute_spec, RESERVED), colour
+    dtypes = attribute_dtypes(ts.attribute_spec, RESERVED)
+    return whole_dtypes(dtypes, ts.attribute_stats, guessed), colour
 
 
 def new_las_header(ts):
@@ -189,7 +193,7 @@ def write_output(ts, source, output, prefix, refined=False, client=None):
         ranks.add(index)
     n_out = len(ranks)
     done = 0
-    dtypes, colour = carried(ts)
+    dtypes, colour = carried(ts, getattr(source, "guessed", ()))
     with PointsAt(output, n_out, {**dtypes, **OUTPUT_COLUMNS},
                   progress=Written(n_out, "formatted as text")) as out:
         for idx, xyz, boundary, nrm, attrs in _in_tile_order(
