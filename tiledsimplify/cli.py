@@ -33,7 +33,7 @@ from .io.points_out import (
     check_output,
     check_writable,
     largest_colour,
-    whole_columns,
+    whole_dtypes,
     write_json,
     write_points,
 )
@@ -527,7 +527,11 @@ def _simplify(args):
     sel = np.ones(res.n, bool) if args.all_points else res.keep
     own = ("sharp_edge", "importance", "simplify_rank", "nx", "ny", "nz")
     # a text file's columns of whole numbers as integers, as a tiled run writes them
-    dims = whole_columns(dims, getattr(source, "guessed", ()))
+    from .tiles.ingest import value_stats
+    guessed = [name for name in getattr(source, "guessed", ()) if name in dims]
+    types = whole_dtypes({name: v.dtype for name, v in dims.items()},
+                         value_stats({name: dims[name] for name in guessed}), guessed)
+    dims = {name: v.astype(types[name], copy=False) for name, v in dims.items()}
     columns = {  # the input's dimensions first (colour 8-bit), then the simplifier's
         **attribute_columns({name: v[sel] for name, v in dims.items()}, largest_colour(dims),
                             own),

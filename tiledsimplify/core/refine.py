@@ -73,9 +73,9 @@ PROTECT = 3.0
 #: only, against protecting all; docs/measurements.md "Protected only beside a point below
 #: the level"): 2 — cycloidal's mean error 44.89 -> 43.40 (below every peer's: MeshLab's
 #: Poisson disk 44.45), edge coverage 0.712 -> 0.729, Hausdorff -5.4 %; Autzen's mean error
-#: +1.6 %, Hausdorff -2.9 %; the other 37 within 1 %. 1: cycloidal's mean error won too
-#: (43.74), but mean error +0.7 % in geometric mean (up to +3.6 % on scans); 3: cycloidal
-#: 44.83, lost.
+#: +1.6 %, Hausdorff -2.9 %; the other 37: edge coverage, mean error and Hausdorff within
+#: 1 %. 1: cycloidal's mean error won too (43.74), but mean error +0.7 % in geometric mean
+#: (up to +3.6 % on scans); 3: cycloidal 44.83, lost.
 PROTECT_HOPS = 2
 
 #: flagged points (sharp-edge flags) the refinement brings and keeps within

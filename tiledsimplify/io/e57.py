@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import FileFormatError, InputError
 from .las_output import NEW_POINT_DEFAULTS
+from .points_out import whole_type
 from .sources import check_finite, to_uint16
 
 CARTESIAN = ("cartesianX", "cartesianY", "cartesianZ")
@@ -48,6 +49,9 @@ OTHER = {"return_number": ("returnIndex", 1, None), "number_of_returns": ("retur
          "isTimeStampInvalid": ("isTimeStampInvalid", 0, np.dtype(np.uint8)),
          "isIntensityInvalid": ("isIntensityInvalid", 0, np.dtype(np.uint8)),
          "isColorInvalid": ("isColorInvalid", 0, np.dtype(np.uint8))}
+
+#: the types an integer field is read as, the first that holds its declared bounds (int64 else)
+_SIGNED = tuple(np.dtype(t) for t in (np.int8, np.int16, np.int32))
 
 
 def _pye57(path):
@@ -121,10 +125,7 @@ def _integer_type(lib, proto, field, added):
     if node.type() == lib.NodeType.E57_INTEGER:
         t = lib.IntegerNode(node)
         lo, hi = int(t.minimum()) + added, int(t.maximum()) + added
-        for dtype in (np.int8, np.int16, np.int32):
-            info = np.iinfo(dtype)
-            if info.min <= lo and hi <= info.max:
-                return np.dtype(dtype)
+        return whole_type(lo, hi, _SIGNED) or np.dtype(np.int64)
     return np.dtype(np.int64)
 
 

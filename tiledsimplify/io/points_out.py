@@ -96,9 +96,9 @@ def _attribute_names(name, trail):
 WHOLE_TYPES = tuple(np.dtype(t) for t in ("u1", "i1", "u2", "i2", "u4", "i4"))
 
 
-def whole_type(lo, hi):
-    """The first of :data:`WHOLE_TYPES` that holds ``lo .. hi`` (whole numbers), or None."""
-    for t in WHOLE_TYPES:
+def whole_type(lo, hi, types=WHOLE_TYPES):
+    """The first of ``types`` (integer dtypes) that holds ``lo .. hi``, or None."""
+    for t in types:
         info = np.iinfo(t)
         if info.min <= lo and hi <= info.max:
             return t
@@ -109,22 +109,14 @@ def whole_dtypes(dtypes, stats, guessed):
     """``dtypes`` (column -> dtype) with each float column named in ``guessed`` (the input's
     columns typed by guess, ``TextSource.guessed``) whose values are all whole numbers as
     :func:`whole_type` of its range. ``stats``: name -> ``(least, largest, whole)`` over the
-    whole input (:attr:`~tiledsimplify.tiles.store.TileStore.attribute_stats`)."""
+    whole input (:attr:`~tiledsimplify.tiles.store.TileStore.attribute_stats`, or
+    :func:`~tiledsimplify.tiles.ingest.value_stats` of the values held in memory)."""
     out = dict(dtypes)
     for name in guessed:
         lo, hi, whole = stats.get(name, (None, None, False))
         if name in out and out[name].kind == "f" and whole and lo is not None:
             out[name] = whole_type(lo, hi) or out[name]
     return out
-
-
-def whole_columns(columns, guessed):
-    """``columns`` (name -> (n,) array) with :func:`whole_dtypes`' types, from the values."""
-    stats = {name: (float(v.min()), float(v.max()), bool((np.floor(v) == v).all()))
-             for name, v in columns.items()
-             if name in guessed and v.dtype.kind == "f" and v.size and np.isfinite(v).all()}
-    types = whole_dtypes({name: v.dtype for name, v in columns.items()}, stats, guessed)
-    return {name: v.astype(types[name], copy=False) for name, v in columns.items()}
 
 
 def attribute_dtypes(spec, reserved=()):
