@@ -18,6 +18,7 @@ from . import adjacency
 from . import boundary as boundary_mod
 from . import cell_grid
 from . import edge_fit, edge_lines, thin_walls, two_ring
+from .unresolved import unresolved
 from . import prethin as prethin_mod
 from .bounds import box, finite_rows
 from .heap import coordinate_hash
@@ -197,7 +198,9 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     flags are the same. ``"coverage"``: the two-ring measure, candidates above the threshold,
     a fitted line each (:func:`.edge_fit.localise`), then the band and features of every line
     (:func:`_features_of_fits`) and the flags of the sharp ones and the creases
-    (:func:`_flags`: within ``edge_width`` cloud spacings of the nearest of them).
+    (:func:`_flags`: within ``edge_width`` cloud spacings of the nearest of them); on an even
+    sampling (``thin_walls.median_ring_gap`` below ``FILLED_GAP``) also the points of detail
+    finer than the spacing, which no fit explains (:func:`.unresolved.unresolved`).
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
@@ -238,8 +241,11 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     own = edge_fit.band(fitted, fitted_angle, width)  # the candidates their own fit flags
     band, features = _features_of_fits(Xu, st, fitted, fitted_angle, line, local, width,
                                        spacing, corner, distance, own, rim)
-    return deviation, band, features, _flags(Xu, st, fitted, fitted_angle, line, width, spacing,
-                                             corner, bend, own & corner, narrowed), threshold
+    flags = _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend,
+                   own & corner, narrowed)
+    if filled and spacing > 0:  # detail finer than the sampling (:mod:`.unresolved`)
+        flags |= unresolved(Xu, st.dn, st.dn_cnt, spacing)
+    return deviation, band, features, flags, threshold
 
 
 def _lending_fits(fitted, fitted_angle, width, corner, bend):
