@@ -199,8 +199,9 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     a fitted line each (:func:`.edge_fit.localise`), then the band and features of every line
     (:func:`_features_of_fits`) and the flags of the sharp ones and the creases
     (:func:`_flags`: within ``edge_width`` cloud spacings of the nearest of them); on an even
-    sampling (``thin_walls.median_ring_gap`` below ``FILLED_GAP``) also the points of detail
-    finer than the spacing, which no fit explains (:func:`.unresolved.unresolved`).
+    sampling (``thin_walls.median_ring_gap`` below ``FILLED_GAP``) that is also exact (a CAD
+    model sampled) the points of detail finer than the spacing too, which no fit explains
+    (:func:`.unresolved.unresolved`).
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)

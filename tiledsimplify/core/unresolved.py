@@ -75,14 +75,14 @@ def _nearest(X, p, dn, dn_cnt, mark, ring, idx, d2):
 def variations(X, dn, dn_cnt, var, rms):
     """Per point ``p``: the surface variation of ``p`` and its neighbourhood (see the module
     notes) into ``var``, and the RMS distance of those points from their best plane,
-    ``sqrt(λ0)``, into ``rms``."""
+    ``sqrt(λ0)``, into ``rms`` (``inf`` with fewer than three neighbours)."""
     n = X.shape[0]
     mark, ring, idx, d2 = _buffers(n)
     for p in range(n):
         k = _nearest(X, p, dn, dn_cnt, mark, ring, idx, d2)
-        if k < 3:
+        if k < 3:  # no neighbourhood: not a quiet point of a face either
             var[p] = 0.0
-            rms[p] = 0.0
+            rms[p] = np.inf
             continue
         l0, l1, l2 = sym3_eigvals(*covariance_about(X, p, idx, k))
         l0 = max(l0, 0.0)
