@@ -238,6 +238,36 @@ def test_tiles_protect_what_the_core_protects_inside_a_rough_patch(tmp_path):
     assert same / n > 0.99
 
 
+def test_tiles_flag_unresolved_detail_as_the_core_does(tmp_path, monkeypatch):
+    """A plane sampled exactly and evenly, with a corrugated band finer than the spacing
+    (:mod:`tiledsimplify.core.unresolved`): each tile decides on its own whether its sampling
+    is exact and flags the band as the untiled core does (99 % of the points agree), where
+    the test alone changes the flags of more than a fifth of them."""
+    rng = np.random.default_rng(5)
+    side = 90
+    g = np.stack(np.meshgrid(np.arange(side), np.arange(side)), -1).reshape(-1, 2) * 1.0
+    g += rng.uniform(-0.25, 0.25, g.shape)
+    X = np.c_[g, np.zeros(len(g))]
+    band = (X[:, 0] > 20) & (X[:, 0] < 70)
+    X[band, 2] = 0.6 * np.sin(X[band, 0] * 2 * np.pi / 1.6)
+    np.save(tmp_path / "in.npy", X)
+    s = run(tmp_path / "in.npy", tmp_path / "out.npy", ratio=0.2, tile_points=2000,
+            store=tmp_path / "store")
+    ts = TileStore.open(tmp_path / "store")
+    assert ts.n_tiles >= 4
+    opts = {"boundary_threshold": s.threshold, "spacing": s.spacing}
+    untiled = simplify_points(X, ratio=0.2, options=opts)
+    same = 0
+    for i in range(ts.n_tiles):
+        _, gi = ts.core(i)
+        same += int((ts.read_result(i, "boundary") == untiled.boundary[gi]).sum())
+    assert same / len(X) > 0.99
+    import tiledsimplify.core.simplify as simplify_mod
+    monkeypatch.setattr(simplify_mod, "unresolved", lambda X, *a: np.zeros(len(X), bool))
+    plain = simplify_points(X, ratio=0.2, options=opts)
+    assert (plain.boundary != untiled.boundary).mean() > 0.2
+
+
 def _hausdorff(X, out):
     from scipy.spatial import cKDTree
     t = np.load(out)
