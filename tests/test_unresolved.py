@@ -55,7 +55,7 @@ def test_kernels_against_numpy():
     st = neighbourhoods(X, scale_of(X), reach=12 * median_spacing(X))
     n = len(X)
     var, rms = np.empty(n), np.empty(n)
-    U.variations(X, st.dn, st.dn_cnt, var, rms)
+    U.variations(X, st.dn, st.dn_cnt, np.arange(n), var, rms)
     tol = 0.15
     out = np.empty(n, dtype=bool)
     U.unresolved_points(X, st.dn, st.dn_cnt, var, tol, out)
@@ -69,6 +69,14 @@ def test_kernels_against_numpy():
         expect = var[p] > U.MIN_VARIATION and not _naive_holds(X, p, nb, tol)
         assert out[p] == expect, p
     assert 0.1 < out.mean() < 0.9  # the scene asks both answers
+    # over some points only: theirs as over all, the others left as they were
+    ids = np.arange(3, n, 11)
+    part_var, part_rms = np.full(n, -1.0), np.full(n, -1.0)
+    U.variations(X, st.dn, st.dn_cnt, ids, part_var, part_rms)
+    np.testing.assert_array_equal(part_var[ids], var[ids])
+    np.testing.assert_array_equal(part_rms[ids], rms[ids])
+    rest = np.setdiff1d(np.arange(n), ids)
+    assert (part_var[rest] == -1).all() and (part_rms[rest] == -1).all()
 
 
 def test_fires_on_detail_finer_than_the_spacing_only_where_the_sampling_is_exact():
@@ -98,7 +106,7 @@ def test_fires_on_detail_finer_than_the_spacing_only_where_the_sampling_is_exact
     n = len(noisy)
     st = _unresolved(noisy)[1]
     var, rms = np.empty(n), np.empty(n)
-    U.variations(noisy, st.dn, st.dn_cnt, var, rms)
+    U.variations(noisy, st.dn, st.dn_cnt, np.arange(n), var, rms)
     spacing = median_spacing(noisy)
     assert not U.exact(rms, spacing)
     # a point with fewer than three neighbours is no quiet point of a face: a tenth of them
@@ -106,7 +114,7 @@ def test_fires_on_detail_finer_than_the_spacing_only_where_the_sampling_is_exact
     alone = st.dn_cnt.copy()
     alone[::10] = 0
     var2, rms2 = np.empty(n), np.empty(n)
-    U.variations(noisy, st.dn, alone, var2, rms2)
+    U.variations(noisy, st.dn, alone, np.arange(n), var2, rms2)
     assert np.isinf(rms2[::10]).all() and not U.exact(rms2, spacing)
     marked = np.empty(n, dtype=bool)
     U.unresolved_points(noisy, st.dn, st.dn_cnt, var, U.ON_PLANE * spacing, marked)

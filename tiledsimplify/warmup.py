@@ -20,8 +20,9 @@ from .core import compile_cache
 def workloads():
     """Small runs that reach every kernel the package calls, with the argument types it calls
     them with: the core in both modes (and without the progressive order) on a sphere, on a
-    cube's faces with exact duplicates, on a flat plate (the 2-D Delaunay) and on an even
-    sample of a sphere (:mod:`.core.unresolved` runs on even samplings), at 10 % (under a
+    cube's faces with exact duplicates, on a flat plate (the 2-D Delaunay) and on a cube's
+    faces sampled exactly and evenly (:mod:`.core.unresolved` runs on those only), at 10 %
+    (under a
     quarter: the pre-thinning runs too); a tiled run in both modes (halo, global cut, gap
     refinement)."""
     from .core.simplify import simplify_points
@@ -33,10 +34,12 @@ def workloads():
     cube = rng.random((1500, 3))
     cube[np.arange(1500), rng.integers(0, 3, 1500)] = rng.integers(0, 2, 1500)
     plate = np.c_[rng.random((800, 2)), np.zeros(800)]
-    # an even sample (a Fibonacci sphere): the detail test runs on even samplings only
-    k = np.arange(1500) + 0.5
-    z, phi = 1 - 2 * k / 1500, np.pi * (1 + 5 ** 0.5) * k
-    even = np.c_[np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z]
+    # a cube's faces, each a jittered grid on its plane: exact and even, as a CAD model
+    # sampled (the detail test runs on such samplings only; an even sphere is not exact)
+    g = (np.stack(np.meshgrid(np.arange(16), np.arange(16)), -1).reshape(-1, 2) + 0.5
+         + rng.uniform(-0.2, 0.2, (256, 2))) / 16
+    even = np.concatenate([np.insert(g, axis, side, axis=1)
+                           for axis in range(3) for side in (0.0, 1.0)])
     for X in (sphere, np.r_[cube, cube[:50]], plate, even):
         for mode in ("coverage", "paper"):
             for progressive in (True, False):

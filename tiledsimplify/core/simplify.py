@@ -244,7 +244,7 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
                                        spacing, corner, distance, own, rim)
     flags = _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend,
                    own & corner, narrowed)
-    if filled and spacing > 0:  # detail finer than the sampling (:mod:`.unresolved`)
+    if filled:  # detail finer than the sampling (:mod:`.unresolved`; it checks the spacing)
         flags |= unresolved(Xu, st.dn, st.dn_cnt, spacing)
     return deviation, band, features, flags, threshold
 
