@@ -29,6 +29,9 @@ tolerance of 0.1 spacings; docs/measurements.md "Unresolved detail flagged").
 import math
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from ._jit import jit, jit_leaf
 from .linalg import covariance_about, sym3_eigvals
@@ -58,6 +61,12 @@ EXACT_SAMPLE = 4096
 #: two neighbours fix a plane with the point only where the sine of their angle seen from it
 #: is at least this
 MIN_SINE = 0.2
+#: unresolved points this many cloud spacings apart or closer belong to one region (:func:`regions`)
+REGION_LINK = 1.5
+#: a region of detail holds at least this many points (:func:`regions`; counter's five threaded
+#: holes hold 55-73 each at 20k points, featuretype's largest group of unresolved points 24;
+#: 30 measured too: the same on the five parts with most such points)
+MIN_REGION = 50
 
 
 @jit
@@ -164,4 +173,23 @@ def unresolved(X, dn, dn_cnt, spacing):
     if exact(rms[sample], spacing):
         variations(X, dn, dn_cnt, np.arange(n, dtype=np.int64), var, rms)
         unresolved_points(X, dn, dn_cnt, var, ON_PLANE * spacing, out)
+    return out
+
+
+def regions(X, unresolved_mask, spacing):
+    """The unresolved points (``unresolved_mask``, of :func:`unresolved`) that lie in regions of
+    detail: groups of at least :data:`MIN_REGION` of them, linked where two lie within
+    :data:`REGION_LINK` ``spacing`` of each other. A threaded hole is one such region (counter's
+    five, 55-73 points each at 20k points); a few unresolved points where facets or fillets
+    meet are not (featuretype's 269 fall into 88 groups, the largest of 24)."""
+    out = np.zeros(X.shape[0], dtype=bool)
+    ids = np.flatnonzero(unresolved_mask)
+    if ids.size < MIN_REGION or not spacing > 0:
+        return out
+    pairs = cKDTree(X[ids]).query_pairs(REGION_LINK * spacing, output_type="ndarray")
+    links = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])),
+                       shape=(ids.size, ids.size))
+    _, label = connected_components(links, directed=False)
+    size = np.bincount(label)
+    out[ids[size[label] >= MIN_REGION]] = True
     return out
