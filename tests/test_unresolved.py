@@ -155,8 +155,9 @@ def test_detail_is_kept_covered_where_its_cover_fits_the_share(monkeypatch):
     """The corrugated band of the test above, its groups of unresolved points taken as regions
     from 10 points (they hold up to 25). At 20 % their cover fits within the sure points'
     share: they join the features, every feature lies within the refinement's cover radius of
-    a kept point, and the sure points stay within the share less the cover's cost. At 1 % it does not fit: the band is flagged
-    only, and what is kept is as with no regions."""
+    a kept point, and the sure points stay within the share less the cover's cost. With a
+    share of 0.05 it does not fit: the band is flagged only, and what is kept is as with no
+    regions."""
     from scipy.spatial import cKDTree
     from tiledsimplify.core.refine import edge_cover_radius
     rng = np.random.default_rng(0)

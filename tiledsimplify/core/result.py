@@ -26,7 +26,9 @@ class SimplifyResult:
         within about one spacing of every line a two-plane fit found — the flags' sharp edges
         and also narrow smooth folds (a fillet a few spacings across: at the kept spacing an
         edge too, but not a sharp one; :mod:`tiledsimplify.core.edge_fit`, "Smooth folds") —
-        but beside a crease only its soft band; in mode
+        but beside a crease only its soft band; and, where the count has room for their
+        cover, regions of detail finer than the spacing that no line explains (a threaded
+        hole; :func:`tiledsimplify.core.unresolved.regions`); in mode
         ``"paper"`` the flags. Up to
         ``options.edge_share`` of the count they are sure of being kept (never removed by the
         greedy): all of them if they fit, else an even sample along the lines — of the

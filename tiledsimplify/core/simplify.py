@@ -180,8 +180,8 @@ def reach_length(Xu, options, spacing=None):
 
 
 def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
-    """Paper step 3: ``(deviation, core band, features, flags, threshold)`` as the options'
-    mode says.
+    """Paper step 3: ``(deviation, core band, features, flags, threshold, detail)`` as the
+    options' mode says.
 
     ``features`` are the points near every fitted line, which the simplification keeps like
     edges; ``flags`` the points reported on or near a sharp edge, which change no kept point.
@@ -202,7 +202,10 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     (:func:`_flags`: within ``edge_width`` cloud spacings of the nearest of them); on an even
     sampling (``thin_walls.median_ring_gap`` below ``FILLED_GAP``) that is also exact (a CAD
     model sampled) the points of detail finer than the spacing too, which no fit explains
-    (:func:`.unresolved.unresolved`).
+    (:func:`.unresolved.unresolved`). ``detail``: those of them in regions of such detail and
+    not among the features (:func:`.unresolved.regions`), which :func:`simplify_points` makes
+    features where their cover fits within ``edge_share`` (:func:`_detail_cover`); none
+    elsewhere and in mode ``"paper"``.
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
@@ -639,7 +642,6 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     # count (of the tile's share of the global one in a tiled run, as every pass over it
     # asks): all of them if they fit; else an even sample of them, the band's points nearest
     # their line first — of the band alone where the band does not fit. The other feature
-    # points (flagged or not) compete with the rest
     # points (flagged or not) compete with the rest. Regions of detail finer than the spacing
     # join the features where their cover fits within that share, the sure points giving way
     anchor_u = features_u

@@ -6,7 +6,10 @@ teeth, a stack of discs a spacing apart — shows no such shape: its points scat
 plane, and its smoothed deviation can be as low as a face's (0.007 rad near counter's threads,
 where candidates need 0.08; docs/measurements.md "Counter's threaded holes"). Every such
 point lies within a spacing or so of the edges of that detail, so it is flagged
-(:func:`.simplify.boundary_flags`: the flags only; what is kept does not change).
+(:func:`.simplify.boundary_flags`). Where such points that no fit explains make a region
+(:func:`regions`: a threaded hole), the simplification keeps them covered as it does the
+edges, if the count has room for it (:func:`.simplify._detail_cover`); scattered ones, where
+facets or fillets meet, are flagged only.
 
 A point is **unresolved** where its :data:`NEAREST` nearest points in its two-ring of the
 local Voronoi mesh (:func:`.two_ring.gather_rings`) spread off their best plane (surface
@@ -61,10 +64,10 @@ EXACT_SAMPLE = 4096
 #: two neighbours fix a plane with the point only where the sine of their angle seen from it
 #: is at least this
 MIN_SINE = 0.2
-#: unresolved points this many cloud spacings apart or closer belong to one region (:func:`regions`)
+#: unresolved points this many cloud spacings apart or closer are of one region (:func:`regions`)
 REGION_LINK = 1.5
 #: a region of detail holds at least this many points (:func:`regions`; counter's five threaded
-#: holes hold 55-73 each at 20k points, featuretype's largest group of unresolved points 24;
+#: holes hold 58-73 each at 20k points, featuretype's largest group of unresolved points 24;
 #: 30 measured too: the same on the five parts with most such points)
 MIN_REGION = 50
 
@@ -180,7 +183,7 @@ def regions(X, unresolved_mask, spacing):
     """The unresolved points (``unresolved_mask``, of :func:`unresolved`) that lie in regions of
     detail: groups of at least :data:`MIN_REGION` of them, linked where two lie within
     :data:`REGION_LINK` ``spacing`` of each other. A threaded hole is one such region (counter's
-    five, 55-73 points each at 20k points); a few unresolved points where facets or fillets
+    five, 58-73 points each at 20k points); a few unresolved points where facets or fillets
     meet are not (featuretype's 269 fall into 88 groups, the largest of 24)."""
     out = np.zeros(X.shape[0], dtype=bool)
     ids = np.flatnonzero(unresolved_mask)
