@@ -79,8 +79,8 @@ def test_a_rims_line_makes_features_but_not_the_core_band():
     tray scans' budget from their faces."""
     X, d = _thin_plate()
     X = X - X.mean(0)
-    _, band, features, _, _ = boundary_flags(X, neighbourhoods(X, scale_of(X)),
-                                             SimplifyOptions())
+    _, band, features, _, _, _ = boundary_flags(X, neighbourhoods(X, scale_of(X)),
+                                                SimplifyOptions())
     truth = d <= 1
     assert (features & truth).sum() > 0.75 * truth.sum()
     assert band.sum() < 0.35 * truth.sum()
