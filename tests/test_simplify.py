@@ -439,3 +439,24 @@ def test_keep_at_below_what_the_run_removed_says_why():
                                          r"never removed, and a run with "
                                          r"options.progressive=False"):
         res.keep_at(count=100)
+
+
+def test_a_ratio_that_keeps_no_point_says_so(tmp_path, caplog):
+    """0.2 of 2 points rounds to none: the result is empty, as asked, and a BudgetWarning says
+    so (the command line logs it; a tiled run logs it too, naming the input). 0.5 keeps one;
+    an explicit count of 0 is taken as meant."""
+    from tiledsimplify.pipeline import run
+    X = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    with pytest.warns(BudgetWarning, match=r"ratio 0.2 of 2 points keeps no point \(0.4 "
+                                           r"rounds to 0\)"):
+        res = simplify_points(X, ratio=0.2)
+    assert res.count == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert simplify_points(X, ratio=0.5).count == 1
+        assert simplify_points(X, count=0).count == 0
+    np.save(tmp_path / "two.npy", X)
+    with caplog.at_level("WARNING", logger="tiledsimplify"):
+        run(tmp_path / "two.npy", tmp_path / "out.npy", ratio=0.2)
+    assert "two.npy: ratio 0.2 of 2 points keeps no point" in caplog.text
+    assert len(np.load(tmp_path / "out.npy")) == 0

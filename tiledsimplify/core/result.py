@@ -130,6 +130,16 @@ def short_message(target, n, must, kept, boundary, vetoed, guard, frozen=None):
             f"{kept}. Raise the target, or " + ", or ".join(fixes) + ".")
 
 
+def nothing_kept(n, ratio, target):
+    """The warning where a ``ratio`` keeps no point of ``n`` (its product rounds to 0: a
+    ratio of 0.2 of 2 points), so the output would be empty; ``""`` otherwise (an explicit
+    ``count=0`` is taken as meant)."""
+    if ratio is None or target != 0 or n == 0:
+        return ""
+    return (f"ratio {float(ratio):g} of {n:,} points keeps no point ({float(ratio) * n:.3g} "
+            "rounds to 0): the output is empty; ask a larger ratio, or a count")
+
+
 def resolve_target(n, ratio, count, guard=None):
     """The target count from exactly one of ``ratio`` (0..1] or ``count`` (0..n) — or None
     from neither where the caller takes ``guard`` (the options' guard rule) and it is

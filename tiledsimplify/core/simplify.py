@@ -29,7 +29,7 @@ from .normals import all_normals
 from .options import SimplifyOptions
 from .refine import edge_cover_radius, protected, refine_coverage
 from .removal import GUARDS, remove_points
-from .result import SimplifyResult, resolve_target, short_message
+from .result import SimplifyResult, nothing_kept, resolve_target, short_message
 from .voronoi import (BOX_FACTOR, SCALE_SPACINGS, TOL_FACTOR, scale_of,
                       voronoi_neighbours)
 from .zorder import distinct
@@ -584,6 +584,8 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     n = X.shape[0]
     covered = None if covered is None else _mask(covered, n, "covered")
     target = resolve_target(n, ratio, count, options.guard)
+    if nothing_kept(n, ratio, target):
+        warnings.warn(nothing_kept(n, ratio, target), BudgetWarning, stacklevel=2)
     by_guard = target is None  # the max_spacing guard alone sets the count
     if by_guard:
         target = 0

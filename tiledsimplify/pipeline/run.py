@@ -39,7 +39,7 @@ from dask.callbacks import Callback
 from .. import __version__, machine
 from ..core import SimplifyOptions, compile_cache, edge_fit, prethin
 from ..core.refine import edge_cover_radius
-from ..core.result import resolve_target, short_message
+from ..core.result import nothing_kept, resolve_target, short_message
 from ..errors import InputError, TiledSimplifyError
 from ..io.las import LAS_SUFFIXES
 from ..io.points_out import cannot_write_in, check_not_input, check_output
@@ -792,6 +792,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"{input}: the input has no points; nothing to simplify. Check that it "
                          "is the file (or glob) you meant.")
     target = resolve_target(n, ratio, count, options.guard)
+    if nothing_kept(n, ratio, target):
+        log.warning("%s: %s", input, nothing_kept(n, ratio, target))
     by_guard = target is None  # the max_spacing guard alone sets the count
     if by_guard:
         target = 0
