@@ -1311,7 +1311,10 @@ def test_a_target_of_zero_points_keeps_none_without_a_refinement_warning(tmp_pat
         summary = run(path, tmp_path / "out.npy", ratio=0.1, workers=1, progress=False)
     assert summary.target == 0 and summary.n_output == 0
     assert len(np.load(tmp_path / "out.npy")) == 0
-    assert not [r for r in caplog.records if r.levelname == "WARNING"]
+    # the one warning says the ratio keeps no point; none from the refinement
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert warned == [f"{path}: ratio 0.1 of 4 points keeps no point (0.4 rounds to 0): the "
+                      "output is empty; ask a larger ratio, or a count"]
 
 
 def test_a_killed_runs_temporary_files_are_named(tmp_path, caplog):
