@@ -238,11 +238,11 @@ def test_tiles_protect_what_the_core_protects_inside_a_rough_patch(tmp_path):
     assert same / n > 0.99
 
 
-def test_tiles_flag_unresolved_detail_as_the_core_does(tmp_path, monkeypatch):
-    """A plane sampled exactly and evenly, with a corrugated band finer than the spacing
-    (:mod:`tiledsimplify.core.unresolved`): each tile decides on its own whether its sampling
-    is exact and flags the band as the untiled core does (99 % of the points agree), where
-    the test alone changes the flags of more than a fifth of them."""
+def _corrugated_in_tiles(tmp_path):
+    """A plane sampled exactly and evenly (a jittered grid, 8,100 points) with a corrugated
+    band finer than the spacing, run in tiles of about 2,000 points at 20 %: the points, the
+    store, and the untiled core's result with the run's threshold and spacing (and those
+    options)."""
     rng = np.random.default_rng(5)
     side = 90
     g = np.stack(np.meshgrid(np.arange(side), np.arange(side)), -1).reshape(-1, 2) * 1.0
@@ -256,12 +256,26 @@ def test_tiles_flag_unresolved_detail_as_the_core_does(tmp_path, monkeypatch):
     ts = TileStore.open(tmp_path / "store")
     assert ts.n_tiles >= 4
     opts = {"boundary_threshold": s.threshold, "spacing": s.spacing}
-    untiled = simplify_points(X, ratio=0.2, options=opts)
+    return X, ts, simplify_points(X, ratio=0.2, options=opts), opts
+
+
+def _tiles_agree(ts, name, untiled):
+    """The share of the points whose saved tile result ``name`` equals ``untiled`` (a mask
+    over the input)."""
     same = 0
     for i in range(ts.n_tiles):
         _, gi = ts.core(i)
-        same += int((ts.read_result(i, "boundary") == untiled.boundary[gi]).sum())
-    assert same / len(X) > 0.99
+        same += int((ts.read_result(i, name) == untiled[gi]).sum())
+    return same / len(untiled)
+
+
+def test_tiles_flag_unresolved_detail_as_the_core_does(tmp_path, monkeypatch):
+    """A plane sampled exactly and evenly, with a corrugated band finer than the spacing
+    (:mod:`tiledsimplify.core.unresolved`): each tile decides on its own whether its sampling
+    is exact and flags the band as the untiled core does (99 % of the points agree), where
+    the test alone changes the flags of more than a fifth of them."""
+    X, ts, untiled, opts = _corrugated_in_tiles(tmp_path)
+    assert _tiles_agree(ts, "boundary", untiled.boundary) > 0.99
     import tiledsimplify.core.simplify as simplify_mod
     monkeypatch.setattr(simplify_mod, "unresolved", lambda X, *a: np.zeros(len(X), bool))
     plain = simplify_points(X, ratio=0.2, options=opts)
@@ -275,29 +289,13 @@ def test_tiles_keep_regions_of_detail_covered_as_the_core_does(tmp_path, monkeyp
     them when measured), where the regions alone change the features of nearly a tenth."""
     from tiledsimplify.core import unresolved as unresolved_mod
     monkeypatch.setattr(unresolved_mod, "MIN_REGION", 10)
-    rng = np.random.default_rng(5)
-    side = 90
-    g = np.stack(np.meshgrid(np.arange(side), np.arange(side)), -1).reshape(-1, 2) * 1.0
-    g += rng.uniform(-0.25, 0.25, g.shape)
-    X = np.c_[g, np.zeros(len(g))]
-    band = (X[:, 0] > 20) & (X[:, 0] < 70)
-    X[band, 2] = 0.6 * np.sin(X[band, 0] * 2 * np.pi / 1.6)
-    np.save(tmp_path / "in.npy", X)
-    s = run(tmp_path / "in.npy", tmp_path / "out.npy", ratio=0.2, tile_points=2000,
-            store=tmp_path / "store")
-    ts = TileStore.open(tmp_path / "store")
-    assert ts.n_tiles >= 4
-    opts = {"boundary_threshold": s.threshold, "spacing": s.spacing}
-    untiled = simplify_points(X, ratio=0.2, options=opts)
-    same = 0
-    for i in range(ts.n_tiles):
-        _, gi = ts.core(i)
-        same += int((ts.read_result(i, "feature") == untiled.features[gi]).sum())
+    X, ts, untiled, opts = _corrugated_in_tiles(tmp_path)
+    agree = _tiles_agree(ts, "feature", untiled.features)
     monkeypatch.setattr(unresolved_mod, "MIN_REGION", 10 ** 9)
     plain = simplify_points(X, ratio=0.2, options=opts)
-    print(f"features agree {same / len(X):.4f}, regions change "
+    print(f"features agree {agree:.4f}, regions change "
           f"{(plain.features != untiled.features).mean():.4f}")
-    assert same / len(X) > 0.99
+    assert agree > 0.99
     assert (plain.features != untiled.features).mean() > 0.05
 
 

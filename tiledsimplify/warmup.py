@@ -22,8 +22,7 @@ def workloads():
     them with: the core in both modes (and without the progressive order) on a sphere, on a
     cube's faces with exact duplicates, on a flat plate (the 2-D Delaunay) and on a cube's
     faces sampled exactly and evenly (:mod:`.core.unresolved` runs on those only), at 10 %
-    (under a
-    quarter: the pre-thinning runs too); a tiled run in both modes (halo, global cut, gap
+    (under a quarter: the pre-thinning runs too); a tiled run in both modes (halo, global cut, gap
     refinement)."""
     from .core.simplify import simplify_points
     from .pipeline import run

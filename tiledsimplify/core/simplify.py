@@ -584,8 +584,9 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     n = X.shape[0]
     covered = None if covered is None else _mask(covered, n, "covered")
     target = resolve_target(n, ratio, count, options.guard)
-    if nothing_kept(n, ratio, target):
-        warnings.warn(nothing_kept(n, ratio, target), BudgetWarning, stacklevel=2)
+    empty = nothing_kept(n, ratio, target)
+    if empty:
+        warnings.warn(empty, BudgetWarning, stacklevel=2)
     by_guard = target is None  # the max_spacing guard alone sets the count
     if by_guard:
         target = 0
@@ -650,11 +651,11 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     share = options.edge_share_value
     stats["n_detail"] = int(detail_u.sum())
     if math.isfinite(share) and not by_guard and (features_u.any() or detail_u.any()):
-        aim = target if prethin_target is None else prethin_target
-        goal = math.floor(share * aim)
+        asked = target if prethin_target is None else prethin_target
+        goal = math.floor(share * asked)
         if spacing is None:  # mode "paper" (not measured yet): once, for the pre-thinning too
             spacing = median_spacing(Xu)
-        need = _detail_cover(Xu, st, detail_u, tie, edge_cover_radius(spacing, aim / m))
+        need = _detail_cover(Xu, st, detail_u, tie, edge_cover_radius(spacing, asked / m))
         stats["n_detail_cover"] = need
         sure_from = features_u
         if detail_u.any() and need <= goal:

@@ -68,7 +68,7 @@ MIN_SINE = 0.2
 REGION_LINK = 1.5
 #: a region of detail holds at least this many points (:func:`regions`; counter's five threaded
 #: holes hold 58-73 each at 20k points, featuretype's largest group of unresolved points 24;
-#: 30 measured too: the same on the five parts with most such points)
+#: at 30 counter's coverage is the same and ADIS16480's mean error 1.3 % higher)
 MIN_REGION = 50
 
 

@@ -792,8 +792,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         raise InputError(f"{input}: the input has no points; nothing to simplify. Check that it "
                          "is the file (or glob) you meant.")
     target = resolve_target(n, ratio, count, options.guard)
-    if nothing_kept(n, ratio, target):
-        log.warning("%s: %s", input, nothing_kept(n, ratio, target))
+    empty = nothing_kept(n, ratio, target)
+    if empty:
+        log.warning("%s: %s", input, empty)
     by_guard = target is None  # the max_spacing guard alone sets the count
     if by_guard:
         target = 0
