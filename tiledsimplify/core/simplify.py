@@ -18,6 +18,7 @@ from . import adjacency
 from . import boundary as boundary_mod
 from . import cell_grid
 from . import edge_fit, edge_lines, thin_walls, two_ring
+from . import holes as holes_mod
 from . import unresolved as unresolved_mod
 from .unresolved import unresolved
 from . import prethin as prethin_mod
@@ -200,12 +201,13 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     a fitted line each (:func:`.edge_fit.localise`), then the band and features of every line
     (:func:`_features_of_fits`) and the flags of the sharp ones and the creases
     (:func:`_flags`: within ``edge_width`` cloud spacings of the nearest of them); on an even
-    sampling (``thin_walls.median_ring_gap`` below ``FILLED_GAP``) that is also exact (a CAD
-    model sampled) the points of detail finer than the spacing too, which no fit explains
-    (:func:`.unresolved.unresolved`). ``detail``: those of them in regions of such detail and
-    not among the features (:func:`.unresolved.regions`), which :func:`simplify_points` makes
-    features where their cover fits within ``edge_share`` (:func:`_detail_cover`); none
-    elsewhere and in mode ``"paper"``.
+    sampling (``thin_walls.median_ring_gap`` below ``FILLED_GAP``) the points near the rims of
+    small holes through thin walls too, as features and flags (:mod:`.holes`), and where that
+    sampling is also exact (a CAD model sampled) the points of detail finer than the spacing,
+    which no fit explains (:func:`.unresolved.unresolved`). ``detail``: those of them in
+    regions of such detail and not among the features (:func:`.unresolved.regions`), which
+    :func:`simplify_points` makes features where their cover fits within ``edge_share``
+    (:func:`_detail_cover`); none elsewhere and in mode ``"paper"``.
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
@@ -249,6 +251,10 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     flags = _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend,
                    own & corner, narrowed)
     detail = none
+    if filled:  # small holes through thin walls: their rims flagged and kept covered
+        rims = holes_mod.hole_rims_near(Xu, st.dn, st.dn_cnt, nn, width, spacing)
+        flags |= rims
+        features |= rims
     if filled:  # detail finer than the sampling (:mod:`.unresolved`; it checks the spacing)
         fine = unresolved(Xu, st.dn, st.dn_cnt, spacing)
         flags |= fine
