@@ -263,7 +263,7 @@ def agreeing_rims(X, dn, dn_cnt, centre, radius, spacing, out):
     hole's rim is a ring of such points, an even sampling's widest empty circle one alone."""
     n = X.shape[0]
     mark = np.zeros(n, dtype=np.int32)
-    ring = np.empty(512, dtype=np.int64)
+    ring = np.empty(MAX_REACH_POINTS, dtype=np.int64)
     tol2 = (AGREE * spacing) ** 2
     for p in range(n):
         out[p] = False
@@ -288,7 +288,7 @@ def hole_flags(X, dn, dn_cnt, centre, normal, radius, width, spacing, out):
     through the local mesh (``dn``). Other entries are left as they are."""
     n = X.shape[0]
     mark = np.zeros(n, dtype=np.int32)
-    ring = np.empty(512, dtype=np.int64)
+    ring = np.empty(MAX_REACH_POINTS, dtype=np.int64)
     band = width * spacing
     hmax = LAYER_GAP_MAX * spacing
     for p in range(n):
