@@ -255,7 +255,7 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
         rims = holes_mod.hole_rims_near(Xu, st.dn, st.dn_cnt, nn, width, spacing)
         flags |= rims
         features |= rims
-    if filled:  # detail finer than the sampling (:mod:`.unresolved`; it checks the spacing)
+        # detail finer than the sampling (:mod:`.unresolved`; it checks the spacing)
         fine = unresolved(Xu, st.dn, st.dn_cnt, spacing)
         flags |= fine
         detail = unresolved_mod.regions(Xu, fine & ~features, spacing)
