@@ -35,6 +35,7 @@ import shutil
 import subprocess
 import sys
 import tarfile
+import tempfile
 import time
 from io import BytesIO
 from pathlib import Path
@@ -76,10 +77,17 @@ def package_at(rev):
             tar.extractall(tmp, filter="data")
         for path in (tmp / "tiledsimplify").rglob("*.py"):
             path.write_text(IMPORT.sub(rf"\1\2 {name}", path.read_text()))
+        # the kernels the copy compiles ahead and loads (its own, not the working tree's)
+        sigs = tmp / "tiledsimplify" / "core" / "kernel_signatures.txt"
+        if sigs.exists():
+            sigs.write_text(re.sub(r"(?m)^tiledsimplify\.", f"{name}.", sigs.read_text()))
         shutil.rmtree(pkg, ignore_errors=True)
         (tmp / "tiledsimplify").rename(pkg)  # complete or absent: never half a package
         shutil.rmtree(tmp)
     sys.path.insert(0, str(root))
+    # its compile processes (``python -m <copy>.core.compile_cache``) import it too
+    os.environ["PYTHONPATH"] = os.pathsep.join(
+        [str(root), *filter(None, [os.environ.get("PYTHONPATH")])])
     return importlib.import_module(name), sha
 
 
@@ -136,6 +144,23 @@ def timed(pkg, X, ratio, options):
     return stages, res
 
 
+def timed_run(pkg, path, out, ratio, options, workers, tile_points):
+    """One tiled run of ``pkg`` (``pkg.run``, local threads) from ``path`` into ``out``:
+    ``(seconds per stage incl. 'total', summary)``."""
+    summary = pkg.run(path, out, ratio=ratio, options=options or None, workers=workers,
+                      tile_points=tile_points)
+    return dict(summary.seconds), summary
+
+
+def same_output(path_a, path_b):
+    """Whether two ``.npy`` outputs hold the same rows (in any order)."""
+    a, b = np.load(path_a), np.load(path_b)
+    if a.shape != b.shape or a.dtype != b.dtype:
+        return False
+    return bool(np.array_equal(np.sort(a, axis=0, kind="stable"), np.sort(b, axis=0, kind="stable"))
+                if a.dtype.names is None else np.array_equal(np.sort(a), np.sort(b)))
+
+
 def table(times_a, times_b):
     """Rows ``(stage, A min, A median, B min, B median, median of the rounds' B / A)``."""
     rows = []
@@ -158,6 +183,10 @@ def main(argv=None):
     ap.add_argument("--rounds", type=int, default=6, help="calls of each (default 6)")
     ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="a SimplifyOptions field for both sides")
+    ap.add_argument("--pipeline", type=int, metavar="WORKERS",
+                    help="time tiled runs (tiledsimplify.run, local threads, this many workers, "
+                         ".npy output) instead of in-memory calls")
+    ap.add_argument("--tile-points", type=int, help="with --pipeline: points per tile")
     args = ap.parse_args(argv)
     if args.rounds < 2:
         ap.error("--rounds: at least 2, so that each side runs first once")
@@ -167,35 +196,65 @@ def main(argv=None):
     X, case_ratio = load_cloud(args.cloud)
     ratio = args.ratio if args.ratio is not None else (case_ratio or 0.2)
     warm = X[np.random.default_rng(0).choice(len(X), min(len(X), 5000), replace=False)]
+    what = (f"tiled runs on {args.pipeline} worker(s)" if args.pipeline else "in-memory calls")
     print(f"A: {args.base} ({sha}); B: the working tree ({Path(b_pkg.__file__).parent}); "
-          f"{len(X):,} points of {args.cloud}, ratio {ratio}, {args.rounds} rounds", flush=True)
-    t = time.perf_counter()
-    for pkg in (a_pkg, b_pkg):
-        pkg.simplify_points(warm, 0.2)
-    print(f"warmed (kernels loaded or compiled) in {time.perf_counter() - t:.1f} s", flush=True)
-    times = {"A": {}, "B": {}}
-    results = {}
-    for r in range(args.rounds):
-        order = (("A", a_pkg), ("B", b_pkg)) if r % 2 == 0 else (("B", b_pkg), ("A", a_pkg))
-        for side, pkg in order:
-            stages, results[side] = timed(pkg, X, ratio, options)
-            for k, v in stages.items():
-                times[side].setdefault(k, []).append(v)
-        print(f"  round {r + 1}: A {times['A']['total'][-1]:.3f} s, "
-              f"B {times['B']['total'][-1]:.3f} s", flush=True)
-    print()
-    print("| stage | A fastest s | A median s | B fastest s | B median s | B / A (median of rounds) |")
-    print("|---|---:|---:|---:|---:|---:|")
-    for stage, a_min, a_med, b_min, b_med, ratio_ in table(times["A"], times["B"]):
-        print(f"| {stage} | {a_min:.3f} | {a_med:.3f} | {b_min:.3f} | {b_med:.3f} | {ratio_:.3f} |")
-    ra, rb = results["A"], results["B"]
-    kept = int(np.count_nonzero(ra.keep != rb.keep))
-    flags = int(np.count_nonzero(ra.boundary != rb.boundary))
-    print()
-    print(f"kept points: {int(ra.keep.sum()):,} (A) and {int(rb.keep.sum()):,} (B), "
-          f"{'the same' if not kept else f'{kept:,} points differ'}; flags "
-          f"{'the same' if not flags else f'{flags:,} points differ'}")
+          f"{len(X):,} points of {args.cloud}, ratio {ratio}, {args.rounds} rounds of {what}",
+          flush=True)
+    with tempfile.TemporaryDirectory(prefix="ab_speed_") as tmp:
+        tmp = Path(tmp)
+        if args.pipeline:
+            path = Path(args.cloud) if Path(args.cloud).is_file() else tmp / "cloud.npy"
+            if path == tmp / "cloud.npy":
+                np.save(path, X)
+            np.save(tmp / "warm.npy", warm)
+            outs = {"A": tmp / "a.npy", "B": tmp / "b.npy"}
 
+            def call(side, pkg):
+                return timed_run(pkg, path, outs[side], ratio, options, args.pipeline,
+                                 args.tile_points)
+
+            def warm_up(pkg):
+                pkg.run(tmp / "warm.npy", tmp / "warm_out.npy", ratio=0.2, workers=1)
+        else:
+            def call(side, pkg):
+                return timed(pkg, X, ratio, options)
+
+            def warm_up(pkg):
+                pkg.simplify_points(warm, 0.2)
+        t = time.perf_counter()
+        for pkg in (a_pkg, b_pkg):
+            warm_up(pkg)
+        print(f"warmed (kernels loaded or compiled) in {time.perf_counter() - t:.1f} s",
+              flush=True)
+        times = {"A": {}, "B": {}}
+        results = {}
+        for r in range(args.rounds):
+            order = (("A", a_pkg), ("B", b_pkg)) if r % 2 == 0 else (("B", b_pkg), ("A", a_pkg))
+            for side, pkg in order:
+                stages, results[side] = call(side, pkg)
+                for k, v in stages.items():
+                    times[side].setdefault(k, []).append(v)
+            print(f"  round {r + 1}: A {times['A']['total'][-1]:.3f} s, "
+                  f"B {times['B']['total'][-1]:.3f} s", flush=True)
+        print()
+        print("| stage | A fastest s | A median s | B fastest s | B median s "
+              "| B / A (median of rounds) |")
+        print("|---|---:|---:|---:|---:|---:|")
+        for stage, a_min, a_med, b_min, b_med, ratio_ in table(times["A"], times["B"]):
+            print(f"| {stage} | {a_min:.3f} | {a_med:.3f} | {b_min:.3f} | {b_med:.3f} "
+                  f"| {ratio_:.3f} |")
+        ra, rb = results["A"], results["B"]
+        print()
+        if args.pipeline:
+            same = same_output(outs["A"], outs["B"])
+            print(f"kept points: {ra.n_output:,} (A) and {rb.n_output:,} (B); the outputs are "
+                  f"{'the same' if same else 'not the same'}")
+            return
+        kept = int(np.count_nonzero(ra.keep != rb.keep))
+        flags = int(np.count_nonzero(ra.boundary != rb.boundary))
+        print(f"kept points: {int(ra.keep.sum()):,} (A) and {int(rb.keep.sum()):,} (B), "
+              f"{'the same' if not kept else f'{kept:,} points differ'}; flags "
+              f"{'the same' if not flags else f'{flags:,} points differ'}")
 
 if __name__ == "__main__":
     main()
