@@ -213,8 +213,10 @@ def main(argv=None):
                 return timed_run(pkg, path, outs[side], ratio, options, args.pipeline,
                                  args.tile_points)
 
-            def warm_up(pkg):
-                pkg.run(tmp / "warm.npy", tmp / "warm_out.npy", ratio=0.2, workers=1)
+            def warm_up(pkg):  # as many workers as the rounds: a run's first C allocator
+                # arena cap holds for the whole process (machine.cap_malloc_arenas)
+                pkg.run(tmp / "warm.npy", tmp / "warm_out.npy", ratio=0.2,
+                        workers=args.pipeline)
         else:
             def call(side, pkg):
                 return timed(pkg, X, ratio, options)
