@@ -157,8 +157,9 @@ def same_output(path_a, path_b):
     a, b = np.load(path_a), np.load(path_b)
     if a.shape != b.shape or a.dtype != b.dtype:
         return False
-    return bool(np.array_equal(np.sort(a, axis=0, kind="stable"), np.sort(b, axis=0, kind="stable"))
-                if a.dtype.names is None else np.array_equal(np.sort(a), np.sort(b)))
+    if a.dtype.names is None:  # rows in lexicographic order (not each column sorted alone)
+        return bool(np.array_equal(a[np.lexsort(a.T[::-1])], b[np.lexsort(b.T[::-1])]))
+    return bool(np.array_equal(np.sort(a), np.sort(b)))  # structured: by field, then the next
 
 
 def table(times_a, times_b):
@@ -257,6 +258,7 @@ def main(argv=None):
         print(f"kept points: {int(ra.keep.sum()):,} (A) and {int(rb.keep.sum()):,} (B), "
               f"{'the same' if not kept else f'{kept:,} points differ'}; flags "
               f"{'the same' if not flags else f'{flags:,} points differ'}")
+
 
 if __name__ == "__main__":
     main()
