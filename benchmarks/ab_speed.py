@@ -1,24 +1,29 @@
 """The core's speed at two revisions, in one process, calls alternating: is a change faster?
 
-On a shared machine the speed of one run drifts by 10-40 % within an hour (docs/measurements.md
-"Suspected slowdown since 2026-12-06": the same code 15.7-17.7 s one afternoon, 8.9 s on a
-quiet morning), more than most changes move it, and separate processes run one after another
-see different hours. Here both revisions run in the same process on the same cloud: the base
-revision's package is copied out of git (``git archive``) under another name, its imports
-renamed, and imported beside the working tree's ``tiledsimplify``; then ``simplify_points``
-runs alternately — A B, B A, A B, ... — so that both see the same drift. The table gives, per
-stage (the result's ``seconds_*`` stats) and for the whole call, the fastest and the median
-of each and the median of the per-round ratios B / A, which is what to read: below 1 the
-working tree (B) is faster. It also says whether both kept the same points and flags.
+On this shared machine a run's speed drifts more than most changes move it (the 1M-point scan
+through the pipeline took 8.9 s in a quiet hour of 2026-12-06 and 14.1-17.8 s on 2026-12-07,
+old code and new alike; docs/measurements.md "Ten ideas for the lost targets, none kept"), and processes run one
+after another see different moments of that drift. Here both revisions run in the same
+process on the same cloud: the base revision's package is copied out of git (``git archive``)
+under another name, its imports and its ``kernel_signatures.txt`` renamed, and imported
+beside the working tree's ``tiledsimplify``; then ``simplify_points`` (or, with ``--pipeline
+WORKERS``, ``tiledsimplify.run`` on local threads) runs alternately — A B, B A, A B, ... — so
+that both see the same drift. The table gives, per stage (the result's ``seconds_*`` stats,
+or the run's stages) and for the whole call, the fastest and the median of each and the
+median of the per-round ratios B / A, which is what to read: below 1 the working tree (B) is
+faster. It also says whether both kept the same points and flags (tiled runs: the same
+output). The same code on both sides gave 0.989 and 0.994 for in-memory calls, 0.94-1.05 for
+tiled runs of the 1M scan (docs/measurements.md "Two revisions in one process").
 
-The copy's kernels compile on its first call (a minute or two the first time), into a cache
-named after the revision under ``$XDG_CACHE_HOME`` (or ``~/.cache``) ``/tiledsimplify/ab``,
-so a second run starts at once. The first call of each side on a small cloud warms both.
+The copy is kept under ``$XDG_CACHE_HOME`` (or ``~/.cache``) ``/tiledsimplify/ab/<sha>``; its
+kernels compile on its first call (90 s), into numba's cache beside the working tree's, so a
+second run starts at once. The first call of each side on a small cloud warms both.
 
     python benchmarks/ab_speed.py scan:150000                  # HEAD against the working tree
     python benchmarks/ab_speed.py scan:150000 --base HEAD~3 --rounds 8
     python benchmarks/ab_speed.py case:tray_bottom             # a quality case at its ratio
     python benchmarks/ab_speed.py scan1m.laz --ratio 0.2       # a LAS/LAZ or point file
+    python benchmarks/ab_speed.py scan1m.laz --pipeline 2 --tile-points 150000
 
 Clouds: ``scan:N``, ``bunny:N``, ``flat:N`` as in ``core_speed.py`` (Fandisk by the line
 scanner; the Bunny's real range scans; Fandisk sampled exactly), ``case:NAME`` a case of
@@ -28,7 +33,6 @@ scanner; the Bunny's real range scans; Fandisk sampled exactly), ``case:NAME`` a
 
 import argparse
 import importlib
-import json
 import os
 import re
 import shutil
@@ -113,31 +117,10 @@ def load_cloud(spec):
     return read_points(path), None
 
 
-def _options(pairs, error):
-    """``--option KEY=VALUE`` pairs as a mapping (values read as JSON where they parse, as
-    ``quality.py`` does), checked against ``SimplifyOptions``."""
-    out = {}
-    for item in pairs:
-        key, sep, value = item.partition("=")
-        if not sep:
-            error(f"--option takes KEY=VALUE (a SimplifyOptions field), got {item!r}")
-        try:
-            out[key.strip()] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key.strip()] = value
-    from tiledsimplify import InputError, SimplifyOptions
-    try:
-        SimplifyOptions.from_mapping(out)
-    except (InputError, TypeError) as exc:
-        error(f"--option: {exc}")
-    return out
-
-
 def timed(pkg, X, ratio, options):
     """One call of ``pkg``'s ``simplify_points``: ``(seconds per stage incl. 'total', result)``."""
-    opts = pkg.SimplifyOptions.from_mapping(options) if options else None
     t = time.perf_counter()
-    res = pkg.simplify_points(X, ratio, options=opts)
+    res = pkg.simplify_points(X, ratio, options=options or None)
     total = time.perf_counter() - t
     stages = {k[len("seconds_"):]: v for k, v in res.stats.items() if k.startswith("seconds_")}
     stages["total"] = total
@@ -191,7 +174,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.rounds < 2:
         ap.error("--rounds: at least 2, so that each side runs first once")
-    options = _options(args.option, ap.error)
+    from quality import parse_options
+    options = parse_options(args.option, ap.error)
     import tiledsimplify as b_pkg
     a_pkg, sha = package_at(args.base)
     X, case_ratio = load_cloud(args.cloud)
@@ -204,8 +188,9 @@ def main(argv=None):
     with tempfile.TemporaryDirectory(prefix="ab_speed_") as tmp:
         tmp = Path(tmp)
         if args.pipeline:
-            path = Path(args.cloud) if Path(args.cloud).is_file() else tmp / "cloud.npy"
-            if path == tmp / "cloud.npy":
+            path = Path(args.cloud)
+            if not path.is_file():  # a cloud made here: the runs read it from a file
+                path = tmp / "cloud.npy"
                 np.save(path, X)
             np.save(tmp / "warm.npy", warm)
             outs = {"A": tmp / "a.npy", "B": tmp / "b.npy"}

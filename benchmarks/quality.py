@@ -356,6 +356,28 @@ def merge_results(runs):
     return list(by_case.values())
 
 
+def parse_options(items, error):
+    """``--option KEY=VALUE`` items as a mapping of ``SimplifyOptions`` fields (each value
+    read as JSON where it parses, else kept as the string), checked against the options;
+    ``error(message)`` (an argument parser's) is called on a malformed item or an unknown or
+    invalid option."""
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            error(f"--option takes KEY=VALUE (a SimplifyOptions field), got {item!r}")
+        try:
+            out[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key.strip()] = value
+    from tiledsimplify import InputError, SimplifyOptions
+    try:
+        SimplifyOptions.from_mapping(out)
+    except (InputError, TypeError) as exc:
+        error(f"--option: {exc}")
+    return out
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--cases", default=None,
@@ -420,20 +442,7 @@ def main(argv=None):
     skip = {s.strip() for s in args.skip.split(",") if s.strip()}
     methods = {} if "all" in skip else {k: v for k, v in peers.available(only).items()
                                           if k not in skip}
-    overrides = {}
-    for item in args.option:
-        key, sep, value = item.partition("=")
-        if not sep:
-            p.error(f"--option takes KEY=VALUE (a SimplifyOptions field), got {item!r}")
-        try:
-            overrides[key.strip()] = json.loads(value)
-        except json.JSONDecodeError:
-            overrides[key.strip()] = value
-    from tiledsimplify import InputError, SimplifyOptions
-    try:
-        SimplifyOptions.from_mapping(overrides)
-    except (InputError, TypeError) as exc:
-        p.error(f"--option: {exc}")
+    overrides = parse_options(args.option, p.error)
     ours = peers.our_methods(overrides)
     if args.modes:
         modes = [m.strip() for m in args.modes.split(",")]

@@ -91,8 +91,8 @@ def test_a_plate_without_a_hole_has_no_rim():
 
 
 def test_the_trays_small_holes_are_flagged_and_covered(data_dir, monkeypatch):
-    """The tray (20k points, 20 %): a plate 1.2 spacings thick drilled with 23 holes 1-3
-    spacings across, whose rims no fit saw. Their rims found: boundary F1 0.713 -> 0.757, edge
+    """The tray (20k points, 20 %): a plate 1.2 spacings thick drilled with 23 holes (their
+    widest empty circles 0.8-3 spacings in radius), whose rims no fit saw. Their rims found: boundary F1 0.713 -> 0.757, edge
     coverage 0.947 -> 0.951 (every peer 0.919 or less), nearly every new flag within a
     spacing of a true edge (docs/measurements.md "Small holes through thin walls")."""
     V, F = read_mesh(data_dir / "meshes" / "trimesh_cad" / "1002_tray_bottom.STL.gz")

@@ -1,7 +1,8 @@
 """Small holes through thin walls: their rims flagged and kept covered (beyond the paper).
 
 A hole a few spacings across drilled through a plate thinner than about two spacings (the
-tray's 23 holes, 1-3 spacings across in a plate 1.2 spacings thick at 20k points) shows no
+tray's 23 holes in a plate 1.2 spacings thick at 20k points: their widest empty circles 0.8-3
+spacings in radius, docs/measurements.md "Small holes through thin walls") shows no
 edge to the fits of :mod:`.edge_fit`: the two-ring of a point on its rim holds both faces of
 the plate and a wall too short and too curved to fit a plane, and the border test
 (:func:`.thin_walls.border_gap`) needs an empty angle of 120° about the point, where a hole
@@ -30,8 +31,8 @@ them covered as it does the edges.
 
 Measured on the tray (docs/measurements.md "Small holes through thin walls"): inside its
 faces the widest empty circle through a point is 0.77 spacings in the median and 1.17 at
-most; through its holes' rims 1.2-3 spacings for 12 of the 23 holes, 0.8-1.0 for the others
-(smaller than the sampling resolves). A point finds a hole only where it lies on the hole's
+most; through its holes' rims 1.2-3 spacings for 12 of the 23 holes, 0.83-1.02 for the
+others (no wider than the sampling's own). A point finds a hole only where it lies on the hole's
 circle (a point a little outside it sees the wall's points in the way), so a hole is found
 by the few sampled points that fall on its rim: 20 points on 4 of the tray's holes (1.6-1.7
 spacings in radius), whose flags add 81 points, 79 within a spacing of an edge. The tray's
