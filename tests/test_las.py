@@ -4,6 +4,7 @@ LasOutput."""
 from __future__ import annotations
 
 import itertools
+import pickle
 import re
 import shutil
 import warnings
@@ -140,7 +141,6 @@ def test_chunked_read_equals_whole_read(name):
 
 
 def test_parts_read_as_the_whole_from_any_point_of_a_laz(tmp_path):
-    import pickle
     files = [lidar_file(AUTZEN), lidar_file(LONE_STAR)]
     with pytest.warns(UserWarning, match="different CRS"):
         src = LasSource(files, chunk_points=CHUNK)
@@ -158,42 +158,74 @@ def test_parts_read_as_the_whole_from_any_point_of_a_laz(tmp_path):
     assert [len(p.chunks().__next__()[1]) for p in src.parts()] == [CHUNK, CHUNK]
 
 
-def variable_chunk_laz(path, monkeypatch, every):
+def variable_chunk_laz(path, monkeypatch, sizes):
     """autzen_trim.laz rewritten as LAZ of chunks of varying size, as COPC files are (LASzip
-    chunk size 2**32 - 1): lazrs told to compress so, a chunk ended every ``every`` points."""
+    chunk size 2**32 - 1): lazrs told to compress so, a chunk ended after each of ``sizes``
+    points (the rest in a last chunk)."""
     import lazrs
     make = lazrs.LazVlr.new_for_compression
     monkeypatch.setattr(lazrs.LazVlr, "new_for_compression",
                         lambda pf, eb, use_variable_size_chunks=False: make(pf, eb, True))
     src = laspy.read(lidar_file(AUTZEN))
+    ends = [*np.cumsum(sizes).tolist(), len(src.points)]
     with laspy.open(path, mode="w", header=src.header, do_compress=True,
                     laz_backend=laspy.LazBackend.Lazrs) as w:
-        for lo in range(0, len(src.points), every):
-            w.write_points(src.points[lo:lo + every])
-            w.point_writer.compressor.finish_current_chunk()
+        for lo, hi in itertools.pairwise([0, *ends]):
+            if lo:
+                w.point_writer.compressor.finish_current_chunk()
+            w.write_points(src.points[lo:hi])
     monkeypatch.undo()
-    return np.c_[src.x, src.y, src.z]
+    return src
 
 
-def test_laz_of_variable_chunks_is_read_from_its_start(tmp_path, monkeypatch):
-    """A LAZ file whose chunks vary in size (COPC) is one part, read from its start: lazrs
-    seeks such files into the wrong chunk (other points or zeros, no error), so a part read
-    from inside it (an ingest in parts) got wrong points. Its points as the original's."""
+def _read_parts(parts):
+    """Every chunk of ``parts``, each part pickled first (as a worker reads it)."""
+    return [c for p in parts for c in pickle.loads(pickle.dumps(p))()]
+
+
+def test_laz_of_variable_chunks_is_cut_at_its_chunks(tmp_path, monkeypatch):
+    """A LAZ file whose chunks vary in size (COPC) is cut at its own chunks, and a part that
+    does not start it decompresses its chunks from their bytes: lazrs seeks such files into
+    the wrong chunk (other points or zeros, no error), so a part read by seeking got wrong
+    points. Read in parts of any size, and in chunks of any size, its points and attributes
+    are the original's, with the right start indices."""
     from tiledsimplify.io.las import variable_chunks
-    expected = variable_chunk_laz(tmp_path / "var.laz", monkeypatch, 30_000)
+    sizes = [7_000, 23_000, 1_000, 41_000]  # and a last chunk of 38,000
+    src = variable_chunk_laz(tmp_path / "var.laz", monkeypatch, sizes)
+    expected = np.c_[src.x, src.y, src.z]
     with laspy.open(tmp_path / "var.laz") as r:
         assert variable_chunks(r.header)
     with laspy.open(lidar_file(AUTZEN)) as r:
         assert not variable_chunks(r.header)
-    assert not LasSource(tmp_path / "var.laz").infos[0].seekable
+    info = LasSource(tmp_path / "var.laz").infos[0]
+    assert not info.seekable
+    assert info.laz_chunks.points.tolist() == [*sizes, 38_000]
+    with laspy.open(tmp_path / "var.laz") as r:  # what this reader would have read
+        r.seek(30_000)
+        assert not np.array_equal(r.read_points(5).X, src.points.X[30_000:30_005])
+    for max_points, chunk_points, cuts in [
+            (None, 9_000, [0]), (1, 9_000, [0, 7_000, 30_000, 31_000, 72_000]),
+            (30_000, 100_000, [0, 30_000, 31_000, 72_000]), (40_000, 16_000, [0, 31_000, 72_000]),
+            (10 ** 9, 5_000, [0])]:
+        source = LasSource(tmp_path / "var.laz", chunk_points=chunk_points)
+        parts = source.parts(max_points)
+        assert [p.lo for p in parts] == cuts and parts[-1].hi == COUNTS[AUTZEN]
+        got = _read_parts(parts)
+        assert max(len(c[1]) for c in got) <= chunk_points
+        assert [s for s, _, _ in got] == np.cumsum([0] + [len(c[1]) for c in got])[:-1].tolist()
+        np.testing.assert_array_equal(np.concatenate([c[1] for c in got]), expected)
+        for name in source.attribute_names:
+            np.testing.assert_array_equal(np.concatenate([c[2][name] for c in got]),
+                                          np.asarray(src.points[name]), err_msg=name)
+    # with a file of fixed chunks after it, the running index goes on
     with pytest.warns(UserWarning, match="different CRS"):
-        src = LasSource([tmp_path / "var.laz", lidar_file(LONE_STAR)], chunk_points=CHUNK)
-    assert [p.seekable for p in src.infos] == [False, True]
-    parts = src.parts(CHUNK)  # a chunk a part: autzen's 110,000 would be cut at 77,777
-    assert [(p.lo, p.hi) for p in parts[:3]] == [(0, COUNTS[AUTZEN]), (0, CHUNK),
-                                                 (CHUNK, 2 * CHUNK)]
-    xyz = np.concatenate([c[1] for c in parts[0]()])
-    np.testing.assert_allclose(xyz, expected, rtol=0, atol=1e-9)
+        both = LasSource([tmp_path / "var.laz", lidar_file(LONE_STAR)], chunk_points=CHUNK)
+    assert [p.seekable for p in both.infos] == [False, True]
+    parts = both.parts(CHUNK)
+    assert [(p.first, p.lo, p.hi) for p in parts[:4]] == [
+        (0, 0, 72_000), (0, 72_000, COUNTS[AUTZEN]), (COUNTS[AUTZEN], 0, CHUNK),
+        (COUNTS[AUTZEN], CHUNK, 2 * CHUNK)]
+    assert _read_parts(parts[1:3])[1][0] == COUNTS[AUTZEN]
     # a run that ingests in parts (4 threads, parts of 20,000 points) writes what a run
     # reading it in one process writes, as for a file of fixed chunks
     import importlib
@@ -205,6 +237,29 @@ def test_laz_of_variable_chunks_is_read_from_its_start(tmp_path, monkeypatch):
     run_module.run(tmp_path / "var.laz", tmp_path / "parts.laz", scheduler="threads",
                    workers=4, **kw)
     assert (tmp_path / "parts.laz").read_bytes() == (tmp_path / "one.laz").read_bytes()
+
+
+def test_laz_chunk_table_that_disagrees_or_is_cut_off(tmp_path, monkeypatch):
+    """A chunk table whose points do not add up to the header's count, and a file cut off
+    inside a chunk a part reads, are errors naming the file (no wrong points)."""
+    variable_chunk_laz(tmp_path / "var.laz", monkeypatch, [50_000])
+    import lazrs
+    read = lazrs.read_chunk_table
+    monkeypatch.setattr(lazrs, "read_chunk_table",
+                        lambda fh, vlr: [(m - 1, size) for m, size in read(fh, vlr)])
+    with pytest.raises(FileFormatError, match=r"var\.laz: its LAZ chunk table holds 109998"):
+        LasSource(tmp_path / "var.laz")
+    monkeypatch.undo()
+    source = LasSource(tmp_path / "var.laz")
+    parts = source.parts(1)
+    cut = tmp_path / "cut.laz"
+    data = (tmp_path / "var.laz").read_bytes()
+    table = source.infos[0].laz_chunks
+    cut.write_bytes(data[:table.start + int(table.sizes[0]) + 100])  # inside the 2nd chunk
+    parts[1].path = cut
+    parts[1].expect = parts[0].expect
+    with pytest.raises(FileFormatError, match=r"cut\.laz: truncated: .* points 50000 to 109999"):
+        list(parts[1]())
 
 
 def test_a_copc_inputs_octree_records_are_not_copied(tmp_path, caplog):
@@ -529,7 +584,6 @@ def test_pieces_packed_elsewhere_write_what_laspy_writes(tmp_path, name, suffix)
     """Pieces packed by a pickled copy of the layout (as a cluster worker would) make the
     file LasOutput.write makes, and its header holds what laspy's own writer (which grows the
     header from the points: bounds, points by return) gives the same records."""
-    import pickle
     src, xyz, attrs = whole(name)
     sel = np.arange(3, len(xyz), 11)
     sub_xyz, sub = xyz[sel], {k: v[sel] for k, v in attrs.items()}
@@ -567,7 +621,6 @@ def test_chunks_compressed_piece_by_piece_make_the_file_laspy_makes(tmp_path):
     boundaries, their whole chunks compressed, the chunks that straddle pieces compressed
     from a tail and the next heads (``straddles``): the file ``write`` makes, and the one
     laspy's own writer makes of the same points."""
-    import pickle
 
     from tiledsimplify.io.las_pieces import straddles
     src, xyz, attrs = whole(LONE_STAR)

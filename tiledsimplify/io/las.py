@@ -294,7 +294,10 @@ class LasFileInfo:
         The header itself (VLRs, EVLRs, extra-bytes description).
     seekable : bool
         Whether its points can be read from any point on (:meth:`LasSource.parts`): False for
-        a LAZ file of chunks of varying size (:func:`variable_chunks`).
+        a LAZ file of chunks of varying size (:func:`variable_chunks`), which is cut at its
+        chunks instead (``laz_chunks``).
+    laz_chunks : LazChunks or None
+        The chunk table of a LAZ file of chunks of varying size (None for any other file).
     """
 
     path: Path
@@ -311,6 +314,7 @@ class LasFileInfo:
     compressed: bool
     header: laspy.LasHeader
     seekable: bool = True
+    laz_chunks: LazChunks | None = None
 
     @property
     def signature(self) -> tuple:
@@ -339,7 +343,9 @@ def variable_chunks(header: laspy.LasHeader) -> bool:
     lazrs (laspy's LAZ backend; 0.8.2, the newest on PyPI on 2026-12-03) reads such a file in
     order, but its seek lands in the wrong chunk past the first: on autzen_trim.laz rewritten
     in 30,000-point chunks, every seek at or after point 30,000 read other points or zeros,
-    without an error. So these files are read from their start only (one part a file).
+    without an error (still so in 0.8.2 on 2026-12-07). So a part of such a file that does not
+    start it is read by its chunk table instead (:class:`LazChunks`): whole chunks, each
+    decompressed from its own bytes.
     """
     for vlr in header.vlrs:
         if vlr.user_id == "laszip encoded" and vlr.record_id == 22204:
@@ -348,12 +354,74 @@ def variable_chunks(header: laspy.LasHeader) -> bool:
     return False
 
 
+@dataclass(frozen=True)
+class LazChunks:
+    """The chunks of a LAZ file whose chunks vary in size (:func:`variable_chunks`), as its
+    chunk table gives them: each chunk is compressed alone, so any run of them decompresses
+    by itself (``lazrs.decompress_points_with_chunk_table``, as laspy's COPC reader reads an
+    octree node) — the way around lazrs's seek in such files.
+
+    ``vlr``: the LASzip VLR's record; ``start``: the byte offset of the first chunk (the
+    point data's, past the 8 bytes of the chunk table's offset); ``points``, ``sizes``:
+    int64 (k,), each chunk's points and bytes."""
+
+    vlr: bytes
+    start: int
+    points: np.ndarray
+    sizes: np.ndarray
+
+    @classmethod
+    def read(cls, path: Path, header: laspy.LasHeader) -> LazChunks:
+        """The table of ``path`` (``header``: its header, the LASzip VLR still in it)."""
+        import lazrs
+        vlr = next(v for v in header.vlrs
+                   if v.user_id == "laszip encoded" and v.record_id == 22204)
+        data = bytes(vlr.record_data_bytes())
+        with open(path, "rb") as fh:
+            fh.seek(header.offset_to_point_data)
+            table = lazrs.read_chunk_table(fh, lazrs.LazVlr(data))
+        table = np.array(table, dtype=np.int64).reshape(-1, 2)
+        points, sizes = table[:, 0].copy(), table[:, 1].copy()
+        count = int(header.point_count)
+        if int(points.sum()) != count or np.any(points < 0) or np.any(sizes < 0):
+            raise FileFormatError(
+                f"{path}: its LAZ chunk table holds {int(points.sum())} points in "
+                f"{len(points)} chunks, its header {count}. {_FIX_READ}")
+        return cls(data, int(header.offset_to_point_data) + 8, points, sizes)
+
+    def runs(self, max_points: int) -> list[tuple[int, int]]:
+        """``(a, b)``: consecutive runs of chunks ``a .. b - 1`` of at most ``max_points``
+        points each, or one chunk where a chunk alone holds more."""
+        out, a, held = [], 0, 0
+        for k, m in enumerate(self.points.tolist()):
+            if k > a and held + m > max_points:
+                out.append((a, k))
+                a, held = k, 0
+            held += m
+        if len(self.points):
+            out.append((a, len(self.points)))
+        return out
+
+    def part(self, a: int, b: int) -> LazChunks:
+        """Chunks ``a .. b - 1`` alone (``start`` their first's byte offset)."""
+        return LazChunks(self.vlr, self.start + int(self.sizes[:a].sum()),
+                         self.points[a:b].copy(), self.sizes[a:b].copy())
+
+
 def _read_info(path: Path) -> LasFileInfo:
     with _open_reader(path) as reader:
         header = reader.header
         count = int(header.point_count)
         # before the decoder is built: laspy then takes the LASzip VLR out of the header
         variable = bool(header.are_points_compressed) and variable_chunks(header)
+        laz_chunks = None
+        if variable and count > 0:
+            try:
+                laz_chunks = LazChunks.read(path, header)
+            except FileFormatError:
+                raise
+            except Exception as exc:
+                raise _format_error(path, exc, " (LAZ chunk table)") from exc
         if count > 0:
             if header.are_points_compressed:
                 try:  # builds the LAZ decoder: reads the LASzip VLR and the chunk table
@@ -386,6 +454,7 @@ def _read_info(path: Path) -> LasFileInfo:
             compressed=bool(header.are_points_compressed),
             header=header,
             seekable=not variable,
+            laz_chunks=laz_chunks,
         )
 
 
@@ -442,14 +511,19 @@ class LasPart:
     (global start indices, the source's attribute names) — :meth:`LasSource.parts`. Holds
     paths and numbers only, so it pickles to other processes and cluster workers.
 
+    ``laz``: for a LAZ file of chunks of varying size (COPC), the part's own run of them
+    (:class:`LazChunks`), which it decompresses from their bytes; any other part seeks its
+    reader to ``lo``.
+
     Calling it returns :meth:`chunks` (a chunk source for :meth:`.TileStore.create`)."""
 
-    def __init__(self, path, expect, first, lo, hi, chunk_points, names):
+    def __init__(self, path, expect, first, lo, hi, chunk_points, names, laz=None):
         self.path = Path(path)
         self.expect = tuple(expect)  # (point record size, point count) when opened
         self.first, self.lo, self.hi = int(first), int(lo), int(hi)
         self.chunk_points = int(chunk_points)
         self.names = tuple(names)
+        self.laz = laz
 
     def __call__(self) -> Iterator[tuple[int, np.ndarray, dict]]:
         return self.chunks()
@@ -467,24 +541,12 @@ class LasPart:
             scales = np.asarray(header.scales, dtype=np.float64)
             offsets = np.asarray(header.offsets, dtype=np.float64)
             box = _header_box(header)
-            done = self.lo
-            if done:
-                try:
-                    reader.seek(done)
-                except Exception as exc:
-                    raise _format_error(path, exc, f" while seeking to point {done}") from exc
-            while done < self.hi:
-                want = min(self.chunk_points, self.hi - done)
-                try:
-                    rec = reader.read_points(want)
-                except Exception as exc:
-                    raise _format_error(path, exc, f" while reading points {done} to "
-                                                   f"{done + want - 1}") from exc
-                if len(rec) != want:
-                    raise FileFormatError(
-                        f"{path}: truncated: the header promises {self.expect[1]} points "
-                        f"but only {done + len(rec)} could be read. {_FIX_READ}")
-                xyz = np.empty((want, 3), dtype=np.float64)
+            if self.laz is not None:
+                records = self._decompressed(header.point_format, scales, offsets)
+            else:
+                records = self._read(reader)
+            for done, rec in records:
+                xyz = np.empty((len(rec), 3), dtype=np.float64)
                 for axis, dim in enumerate(_XYZ):
                     np.multiply(rec[dim], scales[axis], out=xyz[:, axis])
                     xyz[:, axis] += offsets[axis]
@@ -493,7 +555,58 @@ class LasPart:
                 attrs = {name: np.array(rec[name]) for name in self.names}
                 del rec
                 yield self.first + done, xyz, attrs
-                done += want
+
+    def _read(self, reader):
+        """``(first point, records)`` of up to ``chunk_points`` each, from ``reader`` seeked
+        to ``lo``."""
+        path, done = self.path, self.lo
+        if done:
+            try:
+                reader.seek(done)
+            except Exception as exc:
+                raise _format_error(path, exc, f" while seeking to point {done}") from exc
+        while done < self.hi:
+            want = min(self.chunk_points, self.hi - done)
+            try:
+                rec = reader.read_points(want)
+            except Exception as exc:
+                raise _format_error(path, exc, f" while reading points {done} to "
+                                               f"{done + want - 1}") from exc
+            if len(rec) != want:
+                raise FileFormatError(
+                    f"{path}: truncated: the header promises {self.expect[1]} points "
+                    f"but only {done + len(rec)} could be read. {_FIX_READ}")
+            yield done, rec
+            done += want
+
+    def _decompressed(self, fmt, scales, offsets):
+        """As :meth:`_read`, from the part's LAZ chunks: runs of them of at most
+        ``chunk_points`` points (one chunk where it holds more) read as bytes and
+        decompressed alone, then cut into records of at most ``chunk_points``."""
+        import lazrs
+        path, laz, done = self.path, self.laz, self.lo
+        with open(path, "rb") as fh:
+            fh.seek(laz.start)
+            for a, b in laz.runs(self.chunk_points):
+                m, size = int(laz.points[a:b].sum()), int(laz.sizes[a:b].sum())
+                data = fh.read(size)
+                if len(data) != size:
+                    raise FileFormatError(
+                        f"{path}: truncated: its chunk table promises {size} bytes for points "
+                        f"{done} to {done + m - 1} but the file ends before. {_FIX_READ}")
+                raw = np.zeros(m * fmt.size, dtype=np.uint8)
+                table = list(zip(laz.points[a:b].tolist(), laz.sizes[a:b].tolist()))
+                try:
+                    lazrs.decompress_points_with_chunk_table(data, laz.vlr, raw, table)
+                except Exception as exc:
+                    raise _format_error(path, exc, f" while reading points {done} to "
+                                                   f"{done + m - 1}") from exc
+                del data
+                packed = laspy.PackedPointRecord.from_buffer(raw, fmt, m)
+                rec = laspy.ScaleAwarePointRecord(packed.array, fmt, scales, offsets)
+                for lo in range(0, m, self.chunk_points):
+                    yield done + lo, rec[lo:lo + self.chunk_points]
+                done += m
 
 
 class LasSource:
@@ -706,17 +819,28 @@ class LasSource:
     def parts(self, max_points: int | None = None) -> list[LasPart]:
         """The input cut in consecutive parts: each file, cut into ranges of at most
         ``max_points`` (rounded down to whole chunks, at least one; None: whole files; a LAZ
-        file of chunks of varying size, e.g. COPC, whole: :func:`variable_chunks`).
-        Their chunks, part after part, are :meth:`chunks`'s; each part opens its file itself
-        and pickles, so parts can be read at once by threads, processes or cluster workers
-        (a parallel ingest, :meth:`.TileStore.create`)."""
+        file of chunks of varying size, e.g. COPC, :func:`variable_chunks`, cut at its own
+        chunks, runs of them of at most ``max_points`` or one chunk, :class:`LazChunks`).
+        Their points, part after part, are :meth:`chunks`'s (and their chunks too but where a
+        LAZ file of chunks of varying size is cut); each part opens its file itself and
+        pickles, so parts can be read at once by threads, processes or cluster workers (a
+        parallel ingest, :meth:`.TileStore.create`)."""
         out, first = [], 0
         for info in self.infos:
             count = info.point_count
-            cut = max_points if info.seekable else None  # variable chunks: read from the start
-            for lo, hi in part_ranges(count, cut, self.chunk_points):
-                out.append(LasPart(info.path.absolute(), (info.header.point_format.size, count),
-                                   first, lo, hi, self.chunk_points, self._attribute_names))
+            expect = (info.header.point_format.size, count)
+            laz = info.laz_chunks
+            if info.seekable or max_points is None or laz is None:
+                cut = max_points if info.seekable else None
+                for lo, hi in part_ranges(count, cut, self.chunk_points):
+                    out.append(LasPart(info.path.absolute(), expect, first, lo, hi,
+                                       self.chunk_points, self._attribute_names))
+            else:  # chunks of varying size: lazrs cannot seek in them, cut at them
+                ends = np.concatenate([[0], np.cumsum(laz.points)])
+                for a, b in laz.runs(int(max_points)):
+                    out.append(LasPart(info.path.absolute(), expect, first, int(ends[a]),
+                                       int(ends[b]), self.chunk_points,
+                                       self._attribute_names, laz.part(a, b)))
             first += count
         return out
 

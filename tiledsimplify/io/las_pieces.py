@@ -19,8 +19,9 @@ chunk is compressed alone either way (tested).
 Tried first and dropped: chunks that end with each piece, i.e. variable-size chunks (the
 LASzip VLR's chunk size ``2**32 - 1``, a point count per chunk in the table, as COPC files
 have). lazrs 0.8.2 (laspy's LAZ backend, the newest on PyPI) reads such files in order but
-cannot seek in them (it lands in the wrong chunk past the first), so neither laspy's ``seek``
-nor this tool's parallel ingest (:meth:`.las.LasSource.parts`) could read them back.
+cannot seek in them (it lands in the wrong chunk past the first), so laspy's ``seek`` could
+not read them back (this tool's parallel ingest reads such files by their chunk table since,
+:class:`.las.LazChunks`, but other readers would still seek).
 """
 
 from __future__ import annotations

@@ -206,7 +206,8 @@ def _ingest_parts(source, n, scheduler, workers, client):
     scheduler, fewer than :data:`INGEST_PARTS_FROM` worker threads, cluster workers that cannot
     read the input files as the client does. About four parts per worker thread, each of at
     least :data:`INGEST_PART_POINTS`, within files (a LAZ file is read from any point by its
-    chunk table, NPY and binary PLY are mapped, text is read from a line's byte offset)."""
+    chunk table, one of chunks of varying size — COPC — from any of its chunks, NPY and binary
+    PLY are mapped, text is read from a line's byte offset)."""
     if not hasattr(source, "parts") or (client is None and scheduler == "synchronous"):
         return None
     if client is not None:
