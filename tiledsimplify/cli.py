@@ -211,7 +211,8 @@ def _parser():
                                  "folder or glob; or PLY, XYZ/CSV/TXT, NPY")
     r.add_argument("output", help="output .las/.laz (of a non-LAS input: LAS 1.4 point "
                    "format 6, or 7 with colour, its other dimensions as extra bytes), .ply, "
-                   ".npy, .xyz or .csv")
+                   ".npy, .xyz or .csv; a LAS/LAZ name with {stem} (out/{stem}.laz) writes one "
+                   "output per input LAS/LAZ file, each with that file's kept points")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--ratio", type=_ratio, help="fraction of points to keep, in (0, 1]")
     g.add_argument("--count", type=_count, help="number of points to keep")

@@ -408,6 +408,17 @@ class LazChunks:
                          self.points[a:b].copy(), self.sizes[a:b].copy())
 
 
+def _output_template(info: LasFileInfo) -> laspy.LasHeader:
+    """A copy of ``info``'s header as an output's template: less a COPC file's ``copc`` VLR
+    and EVLR (:data:`COPC_USER_ID`), which describe its octree, not an output (kept, readers
+    would take the output for a COPC file)."""
+    header = copy.deepcopy(info.header)
+    for records in (header.vlrs, header.evlrs):
+        if records:
+            records[:] = [r for r in records if r.user_id != COPC_USER_ID]
+    return header
+
+
 def _read_info(path: Path) -> LasFileInfo:
     with _open_reader(path) as reader:
         header = reader.header
@@ -760,6 +771,26 @@ class LasSource:
             bytes included), so no single output layout keeps all of them; or they count
             ``gps_time`` differently (GPS week time or adjusted standard time).
         """
+        self._check_layouts()
+        return _output_template(self._first)
+
+    def file_headers(self) -> list[laspy.LasHeader]:
+        """A copy of each file's own header, as :meth:`template_header` makes of the first:
+        the templates of one output per input file (each keeps its file's scales, offsets,
+        CRS and records, and its own way of counting ``gps_time``).
+
+        Raises
+        ------
+        FileFormatError
+            The files differ in point format id or in their dimensions: the tile store holds
+            only the dimensions they have in common (:attr:`attribute_names`).
+        """
+        self._check_layouts(gps_time=False)
+        return [_output_template(info) for info in self.infos]
+
+    def _check_layouts(self, gps_time=True):
+        """Refuse files of different point formats or dimensions and, with ``gps_time``,
+        files that count ``gps_time`` differently (see :meth:`template_header`)."""
         ref = self._first
         for info in self.infos[1:]:
             if info.signature != ref.signature:
@@ -771,21 +802,16 @@ class LasSource:
                     "format and dimensions. Merge or convert them to one layout first, e.g. "
                     "`pdal merge a.laz b.laz merged.laz` or `pdal translate in.laz out.laz "
                     "--writers.las.dataformat_id=<id> --writers.las.extra_dims=all`.")
-            if "gps_time" in info.dimension_names and _gps_time_type(info) != _gps_time_type(ref):
+            if gps_time and "gps_time" in info.dimension_names and \
+                    _gps_time_type(info) != _gps_time_type(ref):
                 raise FileFormatError(
                     f"{info.path} ({_gps_time_type(info)} GPS time) and {ref.path} "
                     f"({_gps_time_type(ref)} GPS time) count gps_time differently, and one "
                     "LAS/LAZ output has one way: their times would be mixed. Simplify them in "
                     "separate runs (week time cannot be converted without its GPS week), or "
-                    "write a PLY/NPY/text output, which has no gps_time; if a header's flag is "
-                    "simply wrong, fix that file's global encoding first.")
-        header = copy.deepcopy(ref.header)
-        # a COPC input's octree description (the "copc" info VLR and hierarchy EVLR) does
-        # not describe the output: kept, readers would take it for a COPC file
-        for records in (header.vlrs, header.evlrs):
-            if records:
-                records[:] = [r for r in records if r.user_id != COPC_USER_ID]
-        return header
+                    "write a PLY/NPY/text output, which has no gps_time, or one output per "
+                    "input file (an output name with {stem}); if a header's flag is simply "
+                    "wrong, fix that file's global encoding first.")
 
     def __repr__(self) -> str:
         return (f"LasSource({len(self.files)} file(s), {self.count} points, point format "

@@ -222,6 +222,20 @@ def _as_params(dim) -> laspy.ExtraBytesParams:
                                   description=rest[0] if rest else "")
 
 
+def _attribute_names(header):
+    """The dimensions of an output layout other than X, Y, Z (what :meth:`LasOutput.write`
+    and :meth:`.LasLayout.pack` take as ``attrs``)."""
+    return tuple(n for n in header.point_format.dimension_names if n not in _XYZ)
+
+
+def output_layout(path, template_header: laspy.LasHeader, extra_dims=SIMPLIFY_DIMS):
+    """The :class:`.las_pieces.LasLayout` a :class:`LasOutput` of ``path`` and
+    ``template_header`` will have, made without touching a file: pieces for it can be packed
+    (on a cluster's workers) before it is opened."""
+    header, names = output_header(template_header, extra_dims, path)
+    return LasLayout(Path(path), header, _attribute_names(header), names)
+
+
 def output_header(template_header: laspy.LasHeader, extra_dims=SIMPLIFY_DIMS, path=None):
     """The layout :class:`LasOutput` writes: a copy of ``template_header`` with ``extra_dims``
     added (one the template already has with the same type is reused). No file is touched, so
@@ -342,8 +356,7 @@ class LasOutput:
         evlrs = header.evlrs if header.version.minor >= 4 else None
         self._evlrs = evlrs if evlrs else None
         self.header = header
-        self.attribute_names = tuple(n for n in header.point_format.dimension_names
-                                     if n not in _XYZ)
+        self.attribute_names = _attribute_names(header)
         self.extra_names = tuple(names)
         self.count = 0
         self._finished = False

@@ -67,6 +67,15 @@ def _kept(ts, tile, prefix, refined):
     return _keep(ts, tile, prefix, refined), ts.read_result(tile, "boundary")
 
 
+def simplify_extra(boundary):
+    """The dimensions a LAS/LAZ output adds (:data:`~tiledsimplify.io.las_output.SIMPLIFY_DIMS`)
+    for kept points flagged ``boundary``: ``sharp_edge``; ``importance`` NaN and
+    ``simplify_rank`` -1 (kept)."""
+    k = len(boundary)
+    return {"sharp_edge": np.asarray(boundary).astype(np.uint8),
+            "importance": np.full(k, np.nan), "simplify_rank": np.full(k, -1, dtype=np.int64)}
+
+
 def _tile_piece(store_path, tile, prefix, refined, layout, plan, start=None, expect=None):
     """What a LAS/LAZ output takes from one tile: ``(piece, boundary count)`` — its kept core
     points packed as the output's point records (:meth:`.LasLayout.pack`: quantised, checked,
@@ -107,9 +116,7 @@ def _tile_piece(store_path, tile, prefix, refined, layout, plan, start=None, exp
             if values.dtype.kind == "f" and name not in floats:  # whole numbers (the plan's)
                 values = values.astype(np.int64)
             attrs[name] = values
-    piece = layout.pack(xyz, attrs, {"sharp_edge": boundary.astype(np.uint8),
-                                     "importance": np.full(k, np.nan),
-                                     "simplify_rank": np.full(k, -1, dtype=np.int64)})
+    piece = layout.pack(xyz, attrs, simplify_extra(boundary))
     if start is not None:
         piece = layout.chunked(piece, start)
     return piece, int(boundary.sum())
@@ -152,19 +159,23 @@ def _in_tile_order(func, args, n, client):
         del fut
 
 
-def write_output(ts, source, output, prefix, refined=False, client=None):
+def write_output(ts, source, output, prefix, refined=False, client=None, outputs=None):
     """Write the kept core points of every tile: the refined flags if ``refined``, else the
     cut's. LAS/LAZ tile by tile, the other formats in input order at each point's rank
     (:class:`.input_order.InputRanks`, :class:`~tiledsimplify.io.points_out.PointsAt`), in
     memory bounded by a tile; on a cluster the tiles' kept records are read — and for
     LAS/LAZ packed as point records (:func:`_tile_piece`) — ahead by its workers
     (:func:`_in_tile_order`), which also compress a LAZ output's chunks
-    (:func:`_write_laz_chunks`)."""
+    (:func:`_write_laz_chunks`). ``outputs``: one LAS/LAZ output per input file instead
+    (:func:`.per_file.write_per_file`)."""
     n_out = n_boundary = 0
     path = str(ts.path)
     # a tile keeps its core count less its cut (the refinement swaps at equal count)
     counts = [ts.count(t) - int(prefix[t]) for t in range(ts.n_tiles)]
     written = Written(sum(counts))
+    if outputs is not None:
+        from .per_file import write_per_file
+        return write_per_file(ts, source, outputs, prefix, refined, client, written)
     if output.suffix.lower() in LAS_SUFFIXES:
         from ..io.las_output import LasOutput
         if source.is_las:

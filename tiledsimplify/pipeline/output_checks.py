@@ -86,13 +86,16 @@ def warn_regrid(output, source):
             "" if len(moved) == 1 else f"; and {len(moved) - 1} more")
 
 
-def check_layout(output, source):
+def check_layout(output, source, per_file=False):
     """Refuse now, not after the work, a LAS/LAZ output the writer would refuse at the end:
     input files of different point formats or dimensions (no one layout holds them), or an
-    input dimension that clashes with one the output adds (:func:`.las_output.output_header`)."""
+    input dimension that clashes with one the output adds (:func:`.las_output.output_header`).
+    ``per_file``: one output per input file (:mod:`.per_file`), each of its file's header —
+    files that count ``gps_time`` differently are then no error."""
     if output.suffix.lower() in LAS_SUFFIXES and source.is_las:
         from ..io.las_output import output_header
-        output_header(source.template_header(), path=output)
+        template = source.file_headers()[0] if per_file else source.template_header()
+        output_header(template, path=output)
 
 
 def check_grid(output, source, ts):

@@ -47,6 +47,7 @@ from ..io.sources import degrees_message, open_source
 from ..tiles import IncompleteStoreError, TileStore
 from .budget import merge_passes, plan_cut, store_pass, store_sequences
 from .output import write_output
+from .per_file import per_file_outputs
 from .output_checks import (
     bytes_per_point,
     check_grid,
@@ -110,7 +111,8 @@ class RunSummary:
     own, whose size follows the tiles'; not that of worker processes), NaN where the system
     does not say. ``max_spacing``: the bound a ``max_spacing`` guard kept (no input point
     farther from a kept one; None without a guard) — with no count asked, ``target`` is the
-    count it reached.
+    count it reached. ``outputs``: the files written, one per input file, where ``output``
+    was a pattern with ``{stem}`` (:mod:`.per_file`); empty for one output.
     """
 
     n_input: int
@@ -124,6 +126,7 @@ class RunSummary:
     store: str
     output: str
     reached: bool
+    outputs: list = field(default_factory=list)
     message: str = ""
     refined: bool = False
     seconds: dict = field(default_factory=dict)
@@ -711,7 +714,8 @@ def local_workers(scheduler, workers, client, tile_points, room=None):
 def run(input, output, *, ratio=None, count=None, options=None, client=None,
         scheduler="threads", workers=None, store=None, tile_points=None, halo=None,
         floor=0.5, chunk_points=1_000_000, progress=False):
-    """Simplify a cloud of any size tile by tile and write one output.
+    """Simplify a cloud of any size tile by tile and write one output (or one per input
+    file).
 
     Parameters
     ----------
@@ -722,7 +726,9 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         ``.las``/``.laz`` (from LAS input it keeps every dimension, scales, offsets and VLRs;
         from other input it is LAS 1.4 point format 6 at scales of a thousandth of the
         spacing; both add ``sharp_edge``, ``importance``, ``simplify_rank``), or
-        ``.ply``/``.npy``/``.xyz``/``.csv``.
+        ``.ply``/``.npy``/``.xyz``/``.csv``. A LAS/LAZ name with ``{stem}``
+        (``"out/{stem}.laz"``) writes one output per input LAS/LAZ file instead, each with its
+        file's header and kept points (:mod:`.per_file`; the summary's ``outputs``).
     ratio, count : exactly one — the fraction or number of points to keep overall; or
         neither, with ``options.guard="max_spacing"``: as few as that limit allows (the
         summary's ``target`` is then the count reached).
@@ -804,13 +810,17 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     if not 0.0 < float(floor) < 1.0:
         raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
                          f"first runs down to), got {floor!r}; the default is 0.5.")
-    check_output(output, LAS_SUFFIXES)
-    check_not_input(output, source.files)
-    warn_read_back(input, output, source)
-    warn_leftovers(output)
-    check_layout(output, source)
-    warn_regrid(output, source)
-    check_room(output, target * bytes_per_point(output, source), store, n)
+    outputs = per_file_outputs(output, source)  # {stem}: one output per input file
+    for each in outputs or [output]:
+        check_output(each, LAS_SUFFIXES)
+        check_not_input(each, source.files)
+        warn_leftovers(each)
+    first_output = output if outputs is None else outputs[0]
+    warn_read_back(input, first_output, source)  # (a pattern's outputs go where its first does)
+    check_layout(output, source, per_file=outputs is not None)
+    if outputs is None:  # (each file's output keeps its file's grid)
+        warn_regrid(output, source)
+    check_room(first_output, target * bytes_per_point(output, source), store, n)
     tile_points, workers = _whole(tile_points, "tile_points"), _whole(workers, "workers")
     if workers is not None and workers < 1:
         raise InputError(f"workers must be at least 1 (local threads or processes), got "
@@ -841,7 +851,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         settings["prethin"] = {"factor": options.prethin_factor, "scheme": prethin.SCHEME}
         if options.guard == "max_spacing":  # the disks are a share of the limit
             settings["prethin"]["guard_radius"] = prethin.GUARD_RADIUS
-    if options.guard == "max_spacing" and regrids(output, source):  # the tiles' limit is
+    if options.guard == "max_spacing" and outputs is None and regrids(output, source):
         settings["max_spacing_less"] = "the LAS output grid's move"  # less it (guard_limit)
     fp = _fingerprint(source, settings)
 
@@ -911,7 +921,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                      time.perf_counter() - clock[0],
                      "" if parts is None else f", {len(parts)} parts read at once")
         stage("ingest")
-        check_grid(output, source, ts)
+        if outputs is None:  # (each file's output keeps the grid its points were read from)
+            check_grid(output, source, ts)
         degrees = degrees_message(input, *ts.root_attrs["bounds"])
         if degrees:
             log.warning("%s", degrees)
@@ -926,7 +937,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             spacing = ts.spacing
         if spacing is not None:
             opts = {**opts, "spacing": spacing}
-        if options.guard == "max_spacing":  # less what a LAS output's grid moves a point
+        if options.guard == "max_spacing" and outputs is None:  # less what a LAS output's
+            # grid moves a point (each file's own output moves none)
             opts = {**opts, "max_spacing": guard_limit(options.max_spacing, output, source, ts)}
 
         # mode "paper": neighbourhoods of every tile (saved for the tile pass), one threshold
@@ -1003,7 +1015,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             finally:  # the passes' cache of kept flags in this process (a cluster's
                 clear_kept()  # workers keep theirs, at most KEPT_CACHE_BYTES, to their end)
         stage("refine")
-        n_out, n_boundary = write_output(ts, source, output, prefix, refined, client)
+        n_out, n_boundary = write_output(ts, source, output, prefix, refined, client, outputs)
         stage("output")
     except concurrent.futures.CancelledError as exc:  # distributed's FutureCancelledError
         failure = exc
@@ -1045,6 +1057,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          spacing=float(spacing or float("nan")),
                          n_deeper=n_deeper,
                          store="" if store is None else str(store_path), output=str(output),
+                         outputs=[str(o) for o in outputs or ()],
                          reached=reached, message=message, refined=refined, seconds=seconds,
                          cpu_seconds=cpu_seconds, peak_rss_mb=_peak_rss_mb(),
                          workers=None if client is not None else workers,
