@@ -1905,3 +1905,24 @@ def test_processes_run_every_stage_in_one_pool_a_task_at_a_time(bunny, tmp_path,
     threads = run(path, tmp_path / "t.npy", ratio=0.2, tile_points=1500, workers=2)
     assert threads.n_output == s.n_output
     assert np.array_equal(np.load(tmp_path / "p.npy"), np.load(tmp_path / "t.npy"))
+
+
+def test_one_output_per_file_is_the_same_on_a_cluster(data_dir, tmp_path, cluster):
+    """An output per input file (``{stem}``): the pieces packed on the cluster's workers for
+    each file's layout make the files a synchronous run writes, byte for byte."""
+    src = laspy.read(data_dir / "lidar" / "autzen_trim.laz")
+    (tmp_path / "in").mkdir()
+    west = np.asarray(src.x) < np.median(src.x)
+    for name, m in (("west", west), ("east", ~west)):
+        las = laspy.LasData(src.header)
+        las.points = src.points[m]
+        las.write(tmp_path / "in" / f"{name}.laz")
+    kw = {"ratio": 0.3, "tile_points": 30000}
+    outs = {}
+    for how, extra in (("one", {"scheduler": "synchronous"}), ("cluster", {"client": cluster})):
+        (tmp_path / how).mkdir()
+        s = run(str(tmp_path / "in" / "*.laz"), str(tmp_path / how / "{stem}.laz"), **kw,
+                **extra)
+        assert s.n_tiles >= 3 and s.n_output == 33_000
+        outs[how] = [Path(p).read_bytes() for p in s.outputs]
+    assert outs["cluster"] == outs["one"] and all(len(b) > 1000 for b in outs["one"])
