@@ -354,7 +354,7 @@ def variable_chunks(header: laspy.LasHeader) -> bool:
     return False
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # (arrays: compared, they would not give one bool)
 class LazChunks:
     """The chunks of a LAZ file whose chunks vary in size (:func:`variable_chunks`), as its
     chunk table gives them: each chunk is compressed alone, so any run of them decompresses

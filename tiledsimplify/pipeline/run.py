@@ -47,7 +47,6 @@ from ..io.sources import degrees_message, open_source
 from ..tiles import IncompleteStoreError, TileStore
 from .budget import merge_passes, plan_cut, store_pass, store_sequences
 from .output import write_output
-from .per_file import per_file_outputs
 from .output_checks import (
     bytes_per_point,
     check_grid,
@@ -60,6 +59,7 @@ from .output_checks import (
     warn_read_back,
     warn_regrid,
 )
+from .per_file import per_file_outputs
 from .progress import IngestProgress, Progress, refine_line, threshold_line, tile_line
 from .tile_refine import (
     MAX_WIDTH,
