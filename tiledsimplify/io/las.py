@@ -681,6 +681,7 @@ class LasSource:
                 common.append(name)
         self._attribute_names = tuple(common)
         self._first = first
+        self._one_layout = False  # the files' layouts checked alike (file_header)
 
     # ---- description from the headers -------------------------------------------------
 
@@ -774,10 +775,10 @@ class LasSource:
         self._check_layouts()
         return _output_template(self._first)
 
-    def file_headers(self) -> list[laspy.LasHeader]:
-        """A copy of each file's own header, as :meth:`template_header` makes of the first:
-        the templates of one output per input file (each keeps its file's scales, offsets,
-        CRS and records, and its own way of counting ``gps_time``).
+    def file_header(self, k: int) -> laspy.LasHeader:
+        """A copy of file ``k``'s own header, as :meth:`template_header` makes of the first:
+        the template of its output where each input file gets one (it keeps its file's
+        scales, offsets, CRS and records, and its own way of counting ``gps_time``).
 
         Raises
         ------
@@ -785,8 +786,10 @@ class LasSource:
             The files differ in point format id or in their dimensions: the tile store holds
             only the dimensions they have in common (:attr:`attribute_names`).
         """
-        self._check_layouts(gps_time=False)
-        return [_output_template(info) for info in self.infos]
+        if not self._one_layout:  # (once: a folder of thousands of files)
+            self._check_layouts(gps_time=False)
+            self._one_layout = True
+        return _output_template(self.infos[k])
 
     def _check_layouts(self, gps_time=True):
         """Refuse files of different point formats or dimensions and, with ``gps_time``,

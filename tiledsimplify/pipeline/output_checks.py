@@ -94,7 +94,7 @@ def check_layout(output, source, per_file=False):
     files that count ``gps_time`` differently are then no error."""
     if output.suffix.lower() in LAS_SUFFIXES and source.is_las:
         from ..io.las_output import output_header
-        template = source.file_headers()[0] if per_file else source.template_header()
+        template = source.file_header(0) if per_file else source.template_header()
         output_header(template, path=output)
 
 

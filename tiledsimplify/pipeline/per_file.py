@@ -109,7 +109,6 @@ def write_per_file(ts, source, outputs, prefix, refined, client, written):
     :func:`per_file_outputs`): see the module notes. Returns ``(points, boundary points)``
     over all outputs."""
     from ..io.las_output import LasOutput, output_layout
-    headers = source.file_headers()
     starts = np.concatenate([[0], np.cumsum([i.point_count for i in source.infos])])
     path, n = str(ts.path), ts.n_tiles
     files = list(_in_tile_order(_tile_files, lambda i: (path, i, prefix, refined, starts), n,
@@ -117,32 +116,34 @@ def write_per_file(ts, source, outputs, prefix, refined, client, written):
     last = np.full(len(outputs), -1)
     for t, fs in enumerate(files):
         last[fs] = t
-    layouts = {}
-    for fs in files:
-        for f in fs.tolist():
+    layouts = {}  # the layouts of the files of the tiles in flight (made as tiles are asked)
+
+    def layouts_of(i):
+        for f in files[i].tolist():
             if f not in layouts:
-                layouts[f] = output_layout(outputs[f], headers[f])
+                layouts[f] = output_layout(outputs[f], source.file_header(f))
+        return {f: layouts[f] for f in files[i].tolist()}
     held = {}  # file -> its open LasOutput
     n_out = n_boundary = 0
     try:
         for f in np.flatnonzero(last < 0).tolist():  # no point of the file kept
-            with LasOutput(outputs[f], headers[f]):
+            with LasOutput(outputs[f], source.file_header(f)):
                 pass
         pieces = _in_tile_order(
-            _tile_file_pieces,
-            lambda i: (path, i, prefix, refined, {f: layouts[f] for f in files[i].tolist()},
-                       starts), n, client)
+            _tile_file_pieces, lambda i: (path, i, prefix, refined, layouts_of(i), starts), n,
+            client)
         for t, got in enumerate(pieces):
             for f, piece, boundary in got:
                 if f not in held:
-                    held[f] = LasOutput(outputs[f], headers[f])
+                    held[f] = LasOutput(outputs[f], source.file_header(f))
                 held[f].write_piece(piece)
                 n_out += piece.count
                 n_boundary += boundary
                 written(n_out)
             for f in files[t].tolist():
-                if last[f] == t:
+                if last[f] == t:  # its last tile: done (no tile in flight needs its layout)
                     held.pop(f).close()
+                    layouts.pop(f, None)
     except BaseException:
         for out in held.values():
             out.abort()
