@@ -646,3 +646,30 @@ def test_presets_load_with_and_without_their_commented_options(preset, tmp_path)
         assert set(run_cfg) <= set(RUN_KEYS) and run_cfg
         SimplifyOptions.from_mapping(simplify_cfg)
     assert SimplifyOptions.from_mapping(_load_config(on)[1]).guard == "max_spacing"
+
+
+def test_no_edges_on_from_the_flag_and_the_config(tmp_path, monkeypatch):
+    """``--no-edges-on 3,4,5`` and ``[run] no_edge_classes`` reach ``run`` as codes (the flag
+    wins); bad codes are refused by the parser and by the config's check."""
+    from tiledsimplify import cli
+    import tiledsimplify.pipeline as pipeline
+    got = []
+
+    def fake_run(*args, **kwargs):
+        got.append(kwargs["no_edge_classes"])
+        raise SystemExit(0)
+    monkeypatch.setattr(pipeline, "run", fake_run)
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[run]\nratio = 0.2\nno_edge_classes = [7, 18]\n")
+    for argv, want in [(["--ratio", "0.2", "--no-edges-on", "3,4, 5"], [3, 4, 5]),
+                       (["--config", str(cfg)], [7, 18]),
+                       (["--config", str(cfg), "--no-edges-on", "2"], [2]),
+                       (["--ratio", "0.2"], None)]:
+        with pytest.raises(SystemExit):
+            cli.main(["run", "in.laz", "out.laz", *argv])
+        assert got.pop() == want, argv
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["run", "in.laz", "out.laz", "--ratio", "0.2", "--no-edges-on", "trees"])
+    assert exc.value.code == 2
+    cfg.write_text("[run]\nratio = 0.2\nno_edge_classes = 3\n")
+    assert cli.main(["run", "in.laz", "out.laz", "--config", str(cfg)]) != 0

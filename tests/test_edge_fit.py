@@ -578,3 +578,31 @@ def test_fillet_facets_of_plate_holes_are_not_creases(data_dir):
     crease = edge_fit.fold_kinds(bend, ang)[1] & (dist <= 1.0)
     assert (crease & (d > 3)).sum() == 0
     assert (crease & (d <= 1.5)).sum() >= 4
+
+
+def test_points_not_edge_ok_are_never_edge_points(data_dir):
+    """``edge_ok``: the points outside it are never flagged, features or band, and lend no
+    line (no fit of theirs) — the other half of Fandisk keeps flags at its edges; an
+    ``edge_ok`` of every point is the default, bit for bit; in mode "paper" too."""
+    V, F = read_mesh(data_dir / "meshes" / "cad_classic" / "fandisk.obj")
+    X, _ = synthetic.sample_surface_even(V, F, 8000, seed=0)
+    s = synthetic.spacing(X)
+    seg = V[synthetic.sharp_edges(V, F)]
+    west = X[:, 0] < np.median(X[:, 0])
+    for mode, ratio in (("coverage", 0.2), ("paper", 0.4)):  # (paper: 2,631 flags)
+        opts = SimplifyOptions(mode=mode, progressive=False)
+        base = simplify_points(X, ratio=ratio, options=opts)
+        same = simplify_points(X, ratio=ratio, options=opts, edge_ok=np.ones(len(X), bool))
+        for name in ("keep", "boundary", "features", "band", "rank"):
+            np.testing.assert_array_equal(getattr(same, name), getattr(base, name), name)
+        res = simplify_points(X, ratio=ratio, options=opts, edge_ok=west)
+        assert res.reached and res.keep.sum() == base.keep.sum()
+        for name in ("boundary", "features", "band"):
+            got = getattr(res, name)
+            assert not got[~west].any() and getattr(base, name)[~west].any(), (mode, name)
+        if mode == "coverage":  # the west half's flags still find its edges
+            bd = metrics.boundary_detection(X[west], res.boundary[west], edge_segments=seg,
+                                            spacing=s)
+            assert bd["f1"] >= 0.85, bd
+    with pytest.raises(InputError, match="edge_ok must be a boolean mask"):
+        simplify_points(X, ratio=0.2, edge_ok=west[:10])

@@ -1926,3 +1926,34 @@ def test_one_output_per_file_is_the_same_on_a_cluster(data_dir, tmp_path, cluste
         assert s.n_tiles >= 3 and s.n_output == 33_000
         outs[how] = [Path(p).read_bytes() for p in s.outputs]
     assert outs["cluster"] == outs["one"] and all(len(b) > 1000 for b in outs["one"])
+
+
+def test_no_edges_on_classes(data_dir, tmp_path):
+    """``no_edge_classes``: the points of those classes are never flagged (the ALS tile's
+    vegetation, classes 3-5, carries flags otherwise), in every tile and halo; the other
+    classes keep theirs; the count is the same. Refused without a classification dimension,
+    and for codes that are not codes."""
+    src = laspy.read(data_dir / "lidar" / "las_with_several_extra_byte_bloc.laz")
+    cls = np.asarray(src.classification)
+    veg = np.isin(cls, [3, 4, 5])
+    # a corner of the tile, with its trees: 40,000 points nearest the densest vegetation
+    c = np.c_[src.x, src.y][veg].mean(axis=0)
+    near = np.argsort(np.hypot(src.x - c[0], src.y - c[1]))[:40_000]
+    las = laspy.LasData(src.header)
+    las.points = src.points[np.sort(near)]
+    las.write(tmp_path / "in.laz")
+    kw = {"ratio": 0.2, "tile_points": 12_000}
+    base = run(tmp_path / "in.laz", tmp_path / "base.laz", **kw)
+    s = run(tmp_path / "in.laz", tmp_path / "veg.laz", no_edge_classes=[5, 3, 4], **kw)
+    assert s.n_tiles >= 3 and s.n_output == base.n_output
+    a, b = laspy.read(tmp_path / "base.laz"), laspy.read(tmp_path / "veg.laz")
+    va, vb = np.isin(a.classification, [3, 4, 5]), np.isin(b.classification, [3, 4, 5])
+    assert a.sharp_edge[va].sum() > 20 and b.sharp_edge[vb].sum() == 0
+    assert b.sharp_edge[~vb].sum() > 0.5 * a.sharp_edge[~va].sum()
+    np.save(tmp_path / "xyz.npy", np.c_[las.x, las.y, las.z])
+    with pytest.raises(InputError, match="no classification dimension"):
+        run(tmp_path / "xyz.npy", tmp_path / "o.npy", no_edge_classes=[3], **kw)
+    with pytest.raises(InputError, match="classification codes 0-255"):
+        run(tmp_path / "in.laz", tmp_path / "o.laz", no_edge_classes=[300], **kw)
+    with pytest.raises(InputError, match="whole numbers 0-255"):
+        run(tmp_path / "in.laz", tmp_path / "o.laz", no_edge_classes=["trees"], **kw)

@@ -122,6 +122,18 @@ def _distance(text):
     return value
 
 
+def _classes(text):
+    """Classification codes: ``3,4,5`` (whole numbers 0-255, comma-separated)."""
+    try:
+        codes = [int(t) for t in text.replace(" ", "").split(",") if t]
+    except ValueError:
+        codes = []
+    if not codes or not all(0 <= c <= 255 for c in codes):
+        raise argparse.ArgumentTypeError(f"expected classification codes 0-255 separated by "
+                                         f"commas, e.g. 3,4,5,7,18; got {text!r}")
+    return codes
+
+
 def _count(text):
     """A whole number of points: ``2000000``, ``2_000_000`` or ``2e6``."""
     try:
@@ -217,7 +229,8 @@ def _parser():
     g.add_argument("--ratio", type=_ratio, help="fraction of points to keep, in (0, 1]")
     g.add_argument("--count", type=_count, help="number of points to keep")
     r.add_argument("--config", help="TOML file: [run] ratio/count/tile_points/halo/floor/"
-                                    "scheduler/workers, [simplify] core options (see "
+                                    "scheduler/workers/no_edge_classes, [simplify] core "
+                                    "options (see "
                                     "configs/)")
     r.add_argument("--scheduler", default=None,
                    help="threads (default), processes, synchronous, or tcp://HOST:PORT (a "
@@ -242,6 +255,11 @@ def _parser():
                    help=EDGE_SHARE_HELP + "; overrides [simplify] edge_share")
     r.add_argument("--max-spacing", type=_distance, default=None, metavar="DISTANCE",
                    help=MAX_SPACING_HELP + "; overrides [simplify] guard and max_spacing")
+    r.add_argument("--no-edges-on", dest="no_edge_classes", type=_classes, default=None,
+                   metavar="CLASSES",
+                   help="classification codes whose points are never edge points, e.g. "
+                        "3,4,5,7,18 (vegetation, noise): not flagged, not kept like edges, "
+                        "lending no edge line; overrides [run] no_edge_classes")
     r.add_argument("--floor", type=float, default=None,
                    help="each tile first runs down to this fraction of the target ratio "
                         "(0.5); tiles the global cut needs deeper run again. Changes the "
@@ -404,7 +422,11 @@ def _load_config(path):
 #: the keys of a config file's [run] table and the types they take
 RUN_KEYS = {"ratio": (int, float), "count": (int, float), "scheduler": (str,),
             "workers": (int, float), "tile_points": (int, float), "halo": (int, float),
-            "floor": (int, float)}
+            "floor": (int, float), "no_edge_classes": (list,)}
+
+
+#: how an error names the type of a [run] key
+_KIND = {(str,): "a name", (list,): "a list of classification codes, e.g. [3, 4, 5]"}
 
 
 def _run(args):
@@ -418,7 +440,7 @@ def _run(args):
         if isinstance(value, bool) or not isinstance(value, RUN_KEYS[key]):
             raise TiledSimplifyError(
                 f"{args.config}: [run] {key} must be "
-                f"{'a name' if RUN_KEYS[key] == (str,) else 'a number'}, got {value!r}.")
+                f"{_KIND.get(RUN_KEYS[key], 'a number')}, got {value!r}.")
     for key in RUN_KEYS:  # command line wins over the config file
         value = getattr(args, key)
         if value is not None:
@@ -447,6 +469,7 @@ def _run(args):
                   scheduler=run_cfg.get("scheduler", "threads"), workers=run_cfg.get("workers"),
                   store=args.store, tile_points=run_cfg.get("tile_points"),
                   halo=run_cfg.get("halo"), floor=run_cfg.get("floor", 0.5),
+                  no_edge_classes=run_cfg.get("no_edge_classes"),
                   progress=not (args.no_progress or args.quiet))
     code = EXIT_OK if summary.reached else EXIT_BUDGET
     if not summary.reached:

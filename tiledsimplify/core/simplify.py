@@ -180,7 +180,7 @@ def reach_length(Xu, options, spacing=None):
     return factor * spacing if spacing > 0 else math.inf
 
 
-def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
+def boundary_flags(Xu, st, options, distance_out=None, spacing=None, allowed=None):
     """Paper step 3: ``(deviation, core band, features, flags, threshold, detail)`` as the
     options' mode says.
 
@@ -194,7 +194,9 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     (optional, length m): filled in mode ``"coverage"`` with each point's distance to its
     fitted (or borrowed) line in local spacings (``inf``: none), what
     :func:`.prethin.edge_sample` orders by; ``inf`` everywhere in mode ``"paper"``.
-    ``spacing``: the cloud's point spacing (None: measured), the flags' unit.
+    ``spacing``: the cloud's point spacing (None: measured), the flags' unit. ``allowed``
+    (bool (m,), None: all): the points that may be edge points; the others are no candidates
+    of the fits (they lend no line) and none of the masks holds them.
 
     ``"paper"``: the one-ring measure with the automatic threshold (§3.1); band, features and
     flags are the same. ``"coverage"``: the two-ring measure, candidates above the threshold,
@@ -221,6 +223,8 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
         flags, threshold = boundary_mod.detect(
             deviation, threshold=options.boundary_threshold, k=options.boundary_k,
             floor=options.boundary_floor)
+        if allowed is not None:
+            flags = flags & allowed
         return deviation, flags, flags, flags, threshold, none
     smooth_normals = np.zeros((m, 3))
     two_ring.smoothed_deviations(Xu, st.dn, st.dn_cnt, smooth_normals, deviation)
@@ -239,7 +243,10 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
     spacing = float(median_spacing(Xu) if spacing is None else spacing)
     gap = thin_walls.median_ring_gap(Xu, st.normals, st.dn, st.dn_cnt, spacing, GAP_SAMPLE)
     filled = bool(gap < thin_walls.FILLED_GAP)  # the thin walls' border test needs it
-    edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, deviation > threshold, fitted,
+    candidate = deviation > threshold
+    if allowed is not None:  # the others lend no line: no fit of theirs
+        candidate &= allowed
+    edge_fit.localise(Xu, st.normals, st.dn, st.dn_cnt, nn, candidate, fitted,
                       fitted_angle, line, local, float(options.edge_angle), width, corner,
                       bend, narrowed, rim, filled)
     _confirm_narrowed(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend,
@@ -259,6 +266,8 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None):
         fine = unresolved(Xu, st.dn, st.dn_cnt, spacing)
         flags |= fine
         detail = unresolved_mod.regions(Xu, fine & ~features, spacing)
+    if allowed is not None:
+        band, features, flags, detail = (a & allowed for a in (band, features, flags, detail))
     return deviation, band, features, flags, threshold, detail
 
 
@@ -516,7 +525,7 @@ def _warn_lost_neighbours(Xu, D, options, spacing, degree, lonely):
 
 
 def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, state=None,
-                    prethin_target=None, covered=None):
+                    prethin_target=None, covered=None, edge_ok=None):
     """Simplify a point cloud, flagging every point on or near a sharp edge and keeping them
     (up to ``options.edge_share`` of the count; beyond it an even sample along the edges, the
     points nearest each edge line first).
@@ -552,6 +561,12 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
         ``options.max_spacing`` of a kept point, and the only ones that may keep others
         covered (default: all). A tiled run passes a tile's own points: its halo points are
         decided by their own tiles, so they cannot vouch for a gap.
+    edge_ok : bool array (n,), optional
+        The points that may be edge points (default: all). The others are never flagged nor
+        features, and lend no edge line to their neighbours (they are no candidates of the
+        edge fits): simplified as any point of a face. A tiled run of LAS points passes the
+        points not of the classes ``no_edge_classes`` names (vegetation, noise: a fit through
+        a tree's returns finds two planes as readily as a roof's).
 
     Returns
     -------
@@ -589,6 +604,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     X, frozen = _validate(xyz, frozen)
     n = X.shape[0]
     covered = None if covered is None else _mask(covered, n, "covered")
+    edge_ok = None if edge_ok is None else _mask(edge_ok, n, "edge_ok")
     target = resolve_target(n, ratio, count, options.guard)
     empty = nothing_kept(n, ratio, target)
     if empty:
@@ -638,7 +654,7 @@ def simplify_points(xyz, ratio=None, *, count=None, frozen=None, options=None, s
     # the refinement keeps covered; ``band_u`` the features nearest their lines, sampled first
     # for the sure points and never swapped out by the refinement
     deviation_u, band_u, features_u, flags_u, threshold, detail_u = boundary_flags(
-        Xu, st, options, edge_distance, spacing)
+        Xu, st, options, edge_distance, spacing, None if edge_ok is None else edge_ok[rep])
     lap("boundary")
     code = MEASURES[options.importance]
     weight = 0.0

@@ -257,6 +257,29 @@ def _parts_mapper(scheduler, workers, client, ingest):
     return run
 
 
+def _no_edge_classes(classes, input, source):
+    """``no_edge_classes`` as a sorted tuple of distinct codes 0-255 (empty: none), or an error
+    naming the fix; refused at once for LAS/LAZ files without a classification dimension
+    (other inputs are checked after the ingest, which finds their dimensions)."""
+    if classes is None:
+        return ()
+    if isinstance(classes, (str, bytes, numbers.Number)):
+        classes = [classes]
+    try:
+        codes = sorted({_whole(c, "no_edge_classes") for c in classes})
+    except (TypeError, InputError):
+        raise InputError(f"no_edge_classes must be classification codes (whole numbers 0-255), "
+                         f"got {classes!r}; e.g. [3, 4, 5, 7, 18]: vegetation and noise.") from None
+    if codes and not 0 <= codes[0] <= codes[-1] <= 255:
+        raise InputError(f"no_edge_classes must be classification codes 0-255, got {codes}.")
+    if codes and getattr(source, "is_las", False) and \
+            "classification" not in source.attribute_names:
+        raise InputError(f"{input}: no_edge_classes names classification codes, but the input "
+                         "files have no classification dimension in common; leave "
+                         "--no-edges-on out.")
+    return tuple(codes)
+
+
 def _whole(value, name):
     """``value`` as an int if it is a whole number (``1e6`` from a config file too), else an
     error naming the parameter; None stays None."""
@@ -713,7 +736,7 @@ def local_workers(scheduler, workers, client, tile_points, room=None):
 
 def run(input, output, *, ratio=None, count=None, options=None, client=None,
         scheduler="threads", workers=None, store=None, tile_points=None, halo=None,
-        floor=0.5, chunk_points=1_000_000, progress=False):
+        floor=0.5, chunk_points=1_000_000, progress=False, no_edge_classes=None):
     """Simplify a cloud of any size tile by tile and write one output (or one per input
     file).
 
@@ -762,6 +785,11 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         Points read per input chunk (bounds ingest memory).
     progress : bool
         Show a progress bar.
+    no_edge_classes : sequence of int, optional
+        Classification codes (the input's ``classification`` dimension, as LAS has it) whose
+        points are never edge points — neither flagged nor kept like edges, and lending no
+        edge line to their neighbours: e.g. ``[3, 4, 5, 7, 18]``, vegetation and noise, in
+        which edge fits find two planes as readily as on a roof. Simplified as any point.
 
     Returns
     -------
@@ -810,6 +838,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
     if not 0.0 < float(floor) < 1.0:
         raise InputError(f"floor must be in (0, 1) (a fraction of the target ratio each tile "
                          f"first runs down to), got {floor!r}; the default is 0.5.")
+    no_edge = _no_edge_classes(no_edge_classes, input, source)
     outputs = per_file_outputs(output, source)  # {stem}: one output per input file
     for each in outputs or [output]:
         check_output(each, LAS_SUFFIXES)
@@ -851,6 +880,8 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         settings["prethin"] = {"factor": options.prethin_factor, "scheme": prethin.SCHEME}
         if options.guard == "max_spacing":  # the disks are a share of the limit
             settings["prethin"]["guard_radius"] = prethin.GUARD_RADIUS
+    if no_edge:  # the tiles' flags and sequences depend on them
+        settings["no_edge_classes"] = list(no_edge)
     if options.guard == "max_spacing" and outputs is None and regrids(output, source):
         settings["max_spacing_less"] = "the LAS output grid's move"  # less it (guard_limit)
     fp = _fingerprint(source, settings)
@@ -923,6 +954,11 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         stage("ingest")
         if outputs is None:  # (each file's output keeps the grid its points were read from)
             check_grid(output, source, ts)
+        if no_edge and "classification" not in ts.attribute_names:
+            raise InputError(f"{input}: no_edge_classes names classification codes, but the "
+                             f"input has no classification dimension (it has: "
+                             f"{', '.join(ts.attribute_names) or 'coordinates only'}); leave "
+                             "--no-edges-on out.")
         degrees = degrees_message(input, *ts.root_attrs["bounds"])
         if degrees:
             log.warning("%s", degrees)
@@ -951,7 +987,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             threshold = ts.run_attrs.get("threshold")
         if threshold is None and options.detect_boundary and options.mode == "paper":
             done = _compute(_tile_tasks(deviation_histogram, range(ts.n_tiles), ts.count,
-                                        lambda i: (str(store_path), i, opts)),
+                                        lambda i: (str(store_path), i, opts, no_edge)),
                             scheduler, workers, client, progress, "neighbours", threshold_line,
                             points=n)
             threshold = threshold_from_histogram(np.sum([d["hist"] for d in done], axis=0),
@@ -972,7 +1008,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if pending:
             _compute(_tile_tasks(simplify_tile, pending, ts.count, lambda i: (
                 str(store_path), i, opts, thr, ("keep", math.ceil(keep_fraction * ts.count(i))),
-                share)),
+                share, no_edge)),
                 scheduler, workers, client, progress, "tiles", tile_line,
                 points=sum(ts.count(i) for i in pending))
             log.info("simplified %d tiles in %.1f s", len(pending), time.perf_counter() - clock[0])
@@ -993,7 +1029,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             log.info("the global cut reaches past the floor of %d tile(s): running them deeper",
                      len(need))
             _compute(_tile_tasks(simplify_tile, sorted(need), ts.count, lambda i: (
-                str(store_path), i, opts, thr, ("level", need[i]), share)),
+                str(store_path), i, opts, thr, ("level", need[i]), share, no_edge)),
                 scheduler, workers, client, progress, "deeper", tile_line,
                 points=sum(ts.count(i) for i in need))
         else:

@@ -51,6 +51,22 @@ def _tile_cloud(store, tile):
     return xyz, frozen, len(core_xyz)
 
 
+def edge_ok(store, tile, no_edge):
+    """The tile's points (core, then halo, as :func:`_tile_cloud` stacks them) that may be edge
+    points: those whose ``classification`` is not one of ``no_edge`` (``simplify_points``'s
+    ``edge_ok``), each halo point's read from its own tile, so that a point is judged alike in
+    every tile it is part of; None where ``no_edge`` is empty."""
+    if not no_edge:
+        return None
+    core = store.attrs(tile, ["classification"])["classification"]
+    _, _, owner, row = store.tile_halo(tile)
+    halo = np.empty(len(row), dtype=core.dtype)
+    for u in np.unique(owner).tolist():
+        at = owner == u
+        halo[at] = store.attrs(u, ["classification"])["classification"][row[at]]
+    return ~np.isin(np.concatenate([core, halo]), np.asarray(no_edge))
+
+
 def _save_state(store, tile, state, n_points):
     arrays, how = state.to_arrays()
     store.write_state(tile, arrays, {"how": how, "n_points": int(n_points)})
@@ -78,10 +94,11 @@ def _state(store, tile, n_points):
     return None
 
 
-def deviation_histogram(store_path, tile, options):
+def deviation_histogram(store_path, tile, options, no_edge=()):
     """Threshold pass for one tile: build and save its neighbourhoods (paper steps 1-2; their
     reach from ``options``, a :class:`SimplifyOptions` dict with the run's spacing), and
-    return the histogram (over :data:`BINS`) of its core points' boundary measure.
+    return the histogram (over :data:`BINS`) of its core points' boundary measure — of those
+    that may be edge points (:func:`edge_ok`: not of the classes ``no_edge``).
 
     Returns ``{"tile", "hist", "n_points", "n_core", "seconds"}`` (``n_points``: core + halo).
     """
@@ -93,7 +110,9 @@ def deviation_histogram(store_path, tile, options):
     if n_core:
         state, deviation = neighbourhood_state(xyz, frozen, SimplifyOptions(**options))
         _save_state(store, tile, state, len(xyz))
-        hist = np.histogram(np.clip(deviation[:n_core], 0.0, BINS[-1]), bins=BINS)[0]
+        ok = edge_ok(store, tile, no_edge)
+        core = deviation[:n_core] if ok is None else deviation[:n_core][ok[:n_core]]
+        hist = np.histogram(np.clip(core, 0.0, BINS[-1]), bins=BINS)[0]
     return {"tile": int(tile), "hist": hist, "n_points": int(len(xyz)), "n_core": int(n_core),
             "seconds": time.perf_counter() - t0}
 
@@ -125,7 +144,7 @@ def _halo_frozen(frozen, mode):
     return frozen if mode == "paper" else None
 
 
-def simplify_tile(store_path, tile, options, threshold, depth, share=None):
+def simplify_tile(store_path, tile, options, threshold, depth, share=None, no_edge=()):
     """Simplify one tile (halo frozen in mode "paper", simplified with the core otherwise, see
     :func:`_halo_frozen`) down to ``depth``; write the core points' results; mark it done.
 
@@ -149,6 +168,8 @@ def simplify_tile(store_path, tile, options, threshold, depth, share=None):
         (``prethin``) aims at this share of the tile in every pass, so the passes thin a
         tile the same way and the deeper pass's sequence extends the first one's. None: the
         pass's own count.
+    no_edge : sequence of int
+        LAS classification codes whose points are never edge points (:func:`edge_ok`).
 
     Returns
     -------
@@ -210,7 +231,8 @@ def simplify_tile(store_path, tile, options, threshold, depth, share=None):
         aim = None if share is None else math.ceil(share * len(xyz))
         res = simplify_points(xyz, count=count, frozen=tile_frozen,
                               options=SimplifyOptions(**opts), state=state, prethin_target=aim,
-                              covered=~frozen)  # a halo point's own tile may remove it
+                              covered=~frozen,  # a halo point's own tile may remove it
+                              edge_ok=edge_ok(store, tile, no_edge))
         n_all = int(res.order.size)
         if kind == "keep":
             exhausted = n_all < n_remove
