@@ -673,3 +673,30 @@ def test_no_edges_on_from_the_flag_and_the_config(tmp_path, monkeypatch):
     assert exc.value.code == 2
     cfg.write_text("[run]\nratio = 0.2\nno_edge_classes = 3\n")
     assert cli.main(["run", "in.laz", "out.laz", "--config", str(cfg)]) != 0
+
+
+def test_simplify_no_edges_on_classes(data_dir, tmp_path):
+    """The in-memory command takes ``--no-edges-on`` too: no point of those classes flagged
+    (some are without it), the count the same; refused for an input without classes."""
+    import laspy
+    from tiledsimplify import cli
+    src = laspy.read(data_dir / "lidar" / "las_with_several_extra_byte_bloc.laz")
+    veg = np.isin(np.asarray(src.classification), [3, 4, 5])
+    c = np.c_[src.x, src.y][veg].mean(axis=0)
+    near = np.argsort(np.hypot(src.x - c[0], src.y - c[1]))[:15_000]
+    las = laspy.LasData(src.header)
+    las.points = src.points[np.sort(near)]
+    las.write(tmp_path / "in.laz")
+    got = {}
+    for name, extra in (("all", []), ("veg", ["--no-edges-on", "3,4,5"])):
+        assert cli.main(["simplify", str(tmp_path / "in.laz"), str(tmp_path / f"{name}.npy"),
+                         "--ratio", "0.2", "-q", *extra]) == 0
+        got[name] = np.load(tmp_path / f"{name}.npy")
+    for name, out in got.items():
+        v = np.isin(out["classification"], [3, 4, 5])
+        flagged = int(out["sharp_edge"][v].sum())
+        assert (flagged == 0) if name == "veg" else (flagged > 10), (name, flagged)
+    assert len(got["all"]) == len(got["veg"])
+    np.save(tmp_path / "xyz.npy", np.c_[las.x, las.y, las.z])
+    assert cli.main(["simplify", str(tmp_path / "xyz.npy"), str(tmp_path / "o.npy"),
+                     "--ratio", "0.2", "--no-edges-on", "3"]) != 0

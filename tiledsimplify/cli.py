@@ -122,6 +122,10 @@ def _distance(text):
     return value
 
 
+NO_EDGES_HELP = ("classification codes whose points are never edge points, e.g. 3,4,5,7,18 "
+                 "(vegetation, noise): not flagged, not kept like edges, lending no edge line")
+
+
 def _classes(text):
     """Classification codes: ``3,4,5`` (whole numbers 0-255, comma-separated)."""
     try:
@@ -209,6 +213,8 @@ def _parser():
     s.add_argument("--mode", choices=MODES, default=MODES[0],
                    help="coverage (default): thin edge flags, no emptied faces; paper: the "
                         "published rule")
+    s.add_argument("--no-edges-on", dest="no_edge_classes", type=_classes, default=None,
+                   metavar="CLASSES", help=NO_EDGES_HELP)
     s.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
 
     r = sub.add_parser(
@@ -256,10 +262,7 @@ def _parser():
     r.add_argument("--max-spacing", type=_distance, default=None, metavar="DISTANCE",
                    help=MAX_SPACING_HELP + "; overrides [simplify] guard and max_spacing")
     r.add_argument("--no-edges-on", dest="no_edge_classes", type=_classes, default=None,
-                   metavar="CLASSES",
-                   help="classification codes whose points are never edge points, e.g. "
-                        "3,4,5,7,18 (vegetation, noise): not flagged, not kept like edges, "
-                        "lending no edge line; overrides [run] no_edge_classes")
+                   metavar="CLASSES", help=NO_EDGES_HELP + "; overrides [run] no_edge_classes")
     r.add_argument("--floor", type=float, default=None,
                    help="each tile first runs down to this fraction of the target ratio "
                         "(0.5); tiles the global cut needs deeper run again. Changes the "
@@ -539,9 +542,17 @@ def _simplify(args):
         log.warning("%s", degrees)
     if machine.cpus() > 1:  # a cold cache: all cores compile (at once if warm)
         compile_cache.compile_all()
+    edge_ok = None
+    if args.no_edge_classes:
+        if "classification" not in dims:
+            raise InputError(f"{args.input}: --no-edges-on names classification codes, but the "
+                             f"input has no classification dimension (it has: "
+                             f"{', '.join(dims) or 'coordinates only'}); leave it out.")
+        edge_ok = ~np.isin(dims["classification"], args.no_edge_classes)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", BudgetWarning)
-        res = simplify_points(xyz, args.ratio, count=args.count, options=options)
+        res = simplify_points(xyz, args.ratio, count=args.count, options=options,
+                              edge_ok=edge_ok)
     for w in caught:
         log.warning("%s", w.message)
     st = res.stats
