@@ -169,3 +169,14 @@ def test_command_line_summary_names_every_output(tiles, tmp_path):
                                                           "c_east.laz"]
     assert sum(laspy.read(p).header.point_count for p in summary["outputs"]) == \
         summary["n_output"]
+
+
+def test_a_killed_runs_leftovers_are_named(tiles, tmp_path, caplog):
+    """A killed run's temporary file beside one of the outputs is named, as for one output."""
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / ".b_middle.laz.x1y2.partial").write_bytes(b"0" * 1000)
+    with caplog.at_level("WARNING", logger="tiledsimplify"):
+        run(str(tiles / "*.laz"), str(tmp_path / "out" / "{stem}.laz"), ratio=0.2,
+            tile_points=30_000)
+    text = [r.getMessage() for r in caplog.records if "temporary file(s)" in r.getMessage()]
+    assert len(text) == 1 and "b_middle.laz" in text[0] and ".b_middle.laz.x1y2.partial" in text[0]

@@ -59,7 +59,7 @@ from .output_checks import (
     warn_read_back,
     warn_regrid,
 )
-from .per_file import per_file_outputs
+from .per_file import check_outputs, per_file_outputs
 from .progress import IngestProgress, Progress, refine_line, threshold_line, tile_line
 from .tile_refine import (
     MAX_WIDTH,
@@ -840,10 +840,12 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          f"first runs down to), got {floor!r}; the default is 0.5.")
     no_edge = _no_edge_classes(no_edge_classes, input, source)
     outputs = per_file_outputs(output, source)  # {stem}: one output per input file
-    for each in outputs or [output]:
-        check_output(each, LAS_SUFFIXES)
-        check_not_input(each, source.files)
-        warn_leftovers(each)
+    if outputs is None:
+        check_output(output, LAS_SUFFIXES)
+        check_not_input(output, source.files)
+        warn_leftovers(output)
+    else:
+        check_outputs(outputs, source.files)
     first_output = output if outputs is None else outputs[0]
     warn_read_back(input, first_output, source)  # (a pattern's outputs go where its first does)
     check_layout(output, source, per_file=outputs is not None)
