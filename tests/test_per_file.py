@@ -70,12 +70,14 @@ def test_each_output_holds_its_files_kept_points_on_its_files_grid(tiles, tmp_pa
         run(str(tiles / "*.laz"), tmp_path / "one.laz", ratio=0.2, tile_points=30_000)
     s = run(str(tiles / "*.laz"), str(tmp_path / "out" / "{stem}.laz"), ratio=0.2,
             tile_points=30_000)
-    assert s.outputs == [str(tmp_path / "out" / f"{p.stem}.laz") for p in inputs]
+    assert [o["path"] for o in s.outputs] == [str(tmp_path / "out" / f"{p.stem}.laz")
+                                              for p in inputs]
     assert s.n_output == single.n_output == s.target and s.n_boundary == single.n_boundary
     kept = np.load(tmp_path / "one.npy")
     total = 0
     for p, out in zip(inputs, s.outputs):
-        src, got = laspy.read(p), laspy.read(out)
+        src, got = laspy.read(p), laspy.read(out["path"])
+        assert out["points"] == len(got.points) and out["boundary"] == int(got.sharp_edge.sum())
         for key in ("scales", "offsets"):
             np.testing.assert_array_equal(getattr(got.header, key), getattr(src.header, key))
         assert got.header.global_encoding.gps_time_type == src.header.global_encoding.gps_time_type
@@ -114,6 +116,8 @@ def test_a_file_with_no_kept_point_gets_an_empty_output(tiles, tmp_path):
     got = laspy.read(tmp_path / "z_few" / "kept.las")
     assert got.header.point_count == 0 == len(got.points)
     assert laspy.read(tmp_path / "many" / "kept.las").header.point_count == s.n_output
+    assert [(Path(o["path"]).parent.name, o["points"]) for o in s.outputs] == [
+        ("many", s.n_output), ("z_few", 0)]
 
 
 def test_outputs_that_cannot_be_made_are_refused_before_the_work(tiles, tmp_path):
@@ -165,10 +169,11 @@ def test_command_line_summary_names_every_output(tiles, tmp_path):
                  "--ratio", "0.1", "--no-progress", "--summary", str(tmp_path / "s.json")])
     assert code == 0
     summary = json.loads((tmp_path / "s.json").read_text())
-    assert [Path(p).name for p in summary["outputs"]] == ["a_west.laz", "b_middle.laz",
-                                                          "c_east.laz"]
-    assert sum(laspy.read(p).header.point_count for p in summary["outputs"]) == \
-        summary["n_output"]
+    assert [Path(o["path"]).name for o in summary["outputs"]] == ["a_west.laz", "b_middle.laz",
+                                                                  "c_east.laz"]
+    for o in summary["outputs"]:
+        assert laspy.read(o["path"]).header.point_count == o["points"] > 0
+    assert sum(o["points"] for o in summary["outputs"]) == summary["n_output"]
 
 
 def test_a_killed_runs_leftovers_are_named(tiles, tmp_path, caplog):

@@ -1924,7 +1924,7 @@ def test_one_output_per_file_is_the_same_on_a_cluster(data_dir, tmp_path, cluste
         s = run(str(tmp_path / "in" / "*.laz"), str(tmp_path / how / "{stem}.laz"), **kw,
                 **extra)
         assert s.n_tiles >= 3 and s.n_output == 33_000
-        outs[how] = [Path(p).read_bytes() for p in s.outputs]
+        outs[how] = [Path(o["path"]).read_bytes() for o in s.outputs]
     assert outs["cluster"] == outs["one"] and all(len(b) > 1000 for b in outs["one"])
 
 

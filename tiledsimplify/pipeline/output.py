@@ -159,23 +159,20 @@ def _in_tile_order(func, args, n, client):
         del fut
 
 
-def write_output(ts, source, output, prefix, refined=False, client=None, outputs=None):
+def write_output(ts, source, output, prefix, refined=False, client=None):
     """Write the kept core points of every tile: the refined flags if ``refined``, else the
     cut's. LAS/LAZ tile by tile, the other formats in input order at each point's rank
     (:class:`.input_order.InputRanks`, :class:`~tiledsimplify.io.points_out.PointsAt`), in
     memory bounded by a tile; on a cluster the tiles' kept records are read — and for
     LAS/LAZ packed as point records (:func:`_tile_piece`) — ahead by its workers
     (:func:`_in_tile_order`), which also compress a LAZ output's chunks
-    (:func:`_write_laz_chunks`). ``outputs``: one LAS/LAZ output per input file instead
-    (:func:`.per_file.write_per_file`)."""
+    (:func:`_write_laz_chunks`). One LAS/LAZ output per input file:
+    :func:`.per_file.write_per_file`."""
     n_out = n_boundary = 0
     path = str(ts.path)
     # a tile keeps its core count less its cut (the refinement swaps at equal count)
     counts = [ts.count(t) - int(prefix[t]) for t in range(ts.n_tiles)]
     written = Written(sum(counts))
-    if outputs is not None:
-        from .per_file import write_per_file
-        return write_per_file(ts, source, outputs, prefix, refined, client, written)
     if output.suffix.lower() in LAS_SUFFIXES:
         from ..io.las_output import LasOutput
         if source.is_las:

@@ -24,6 +24,7 @@ from ..errors import InputError
 from ..io.las import LAS_SUFFIXES
 from ..tiles import TileStore
 from .output import _in_tile_order, _kept, _keep, simplify_extra
+from .progress import Written
 
 log = logging.getLogger("tiledsimplify")
 
@@ -132,11 +133,14 @@ def _tile_file_pieces(store_path, tile, prefix, refined, layouts, starts):
     return out
 
 
-def write_per_file(ts, source, outputs, prefix, refined, client, written):
+def write_per_file(ts, source, outputs, prefix, refined=False, client=None):
     """Write each input file's kept points to its output (``outputs``, of
-    :func:`per_file_outputs`): see the module notes. Returns ``(points, boundary points)``
-    over all outputs."""
+    :func:`per_file_outputs`; the refined flags if ``refined``, else the cut's ``prefix``):
+    see the module notes. Returns ``(points, boundary points, per output)`` — the last a
+    ``{"path", "points", "boundary"}`` for each output, in the input files' order."""
     from ..io.las_output import LasOutput, output_layout
+    written = Written(sum(ts.count(t) - int(prefix[t]) for t in range(ts.n_tiles)))
+    counts = np.zeros((len(outputs), 2), dtype=np.int64)  # points, boundary points
     starts = np.concatenate([[0], np.cumsum([i.point_count for i in source.infos])])
     path, n = str(ts.path), ts.n_tiles
     files = list(_in_tile_order(_tile_files, lambda i: (path, i, prefix, refined, starts), n,
@@ -165,6 +169,7 @@ def write_per_file(ts, source, outputs, prefix, refined, client, written):
                 if f not in held:
                     held[f] = LasOutput(outputs[f], source.file_header(f))
                 held[f].write_piece(piece)
+                counts[f] += (piece.count, boundary)
                 n_out += piece.count
                 n_boundary += boundary
                 written(n_out)
@@ -178,4 +183,5 @@ def write_per_file(ts, source, outputs, prefix, refined, client, written):
         raise
     log.info("wrote %d output files, one per input file (%s)", len(outputs),
              outputs[0].parent)
-    return n_out, n_boundary
+    return n_out, n_boundary, [{"path": str(o), "points": int(m), "boundary": int(b)}
+                               for o, (m, b) in zip(outputs, counts.tolist())]

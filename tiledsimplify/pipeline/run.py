@@ -59,7 +59,7 @@ from .output_checks import (
     warn_read_back,
     warn_regrid,
 )
-from .per_file import check_outputs, per_file_outputs
+from .per_file import check_outputs, per_file_outputs, write_per_file
 from .progress import IngestProgress, Progress, refine_line, threshold_line, tile_line
 from .tile_refine import (
     MAX_WIDTH,
@@ -111,8 +111,9 @@ class RunSummary:
     own, whose size follows the tiles'; not that of worker processes), NaN where the system
     does not say. ``max_spacing``: the bound a ``max_spacing`` guard kept (no input point
     farther from a kept one; None without a guard) — with no count asked, ``target`` is the
-    count it reached. ``outputs``: the files written, one per input file, where ``output``
-    was a pattern with ``{stem}`` (:mod:`.per_file`); empty for one output.
+    count it reached. ``outputs``: where ``output`` was a pattern with ``{stem}``
+    (:mod:`.per_file`), the files written, one per input file in its order, each a
+    ``{"path", "points", "boundary"}``; empty for one output.
     """
 
     n_input: int
@@ -1053,7 +1054,11 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
             finally:  # the passes' cache of kept flags in this process (a cluster's
                 clear_kept()  # workers keep theirs, at most KEPT_CACHE_BYTES, to their end)
         stage("refine")
-        n_out, n_boundary = write_output(ts, source, output, prefix, refined, client, outputs)
+        if outputs is None:
+            n_out, n_boundary = write_output(ts, source, output, prefix, refined, client)
+        else:
+            n_out, n_boundary, files = write_per_file(ts, source, outputs, prefix, refined,
+                                                      client)
         stage("output")
     except concurrent.futures.CancelledError as exc:  # distributed's FutureCancelledError
         failure = exc
@@ -1095,7 +1100,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
                          spacing=float(spacing or float("nan")),
                          n_deeper=n_deeper,
                          store="" if store is None else str(store_path), output=str(output),
-                         outputs=[str(o) for o in outputs or ()],
+                         outputs=[] if outputs is None else files,
                          reached=reached, message=message, refined=refined, seconds=seconds,
                          cpu_seconds=cpu_seconds, peak_rss_mb=_peak_rss_mb(),
                          workers=None if client is not None else workers,
