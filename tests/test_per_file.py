@@ -185,3 +185,18 @@ def test_a_killed_runs_leftovers_are_named(tiles, tmp_path, caplog):
             tile_points=30_000)
     text = [r.getMessage() for r in caplog.records if "temporary file(s)" in r.getMessage()]
     assert len(text) == 1 and "b_middle.laz" in text[0] and ".b_middle.laz.x1y2.partial" in text[0]
+
+
+def test_output_names_from_a_pattern(tmp_path):
+    """``{stem}`` is the file's name less its suffix, and less ``.copc`` (the output is plain
+    LAZ); anywhere in the pattern, folders too; a name without it is one output."""
+    from types import SimpleNamespace
+
+    from tiledsimplify.pipeline.per_file import per_file_outputs
+    src = SimpleNamespace(is_las=True, files=[Path("a/x.laz"), Path("b/Y.COPC.LAZ"),
+                                              Path("c/z.las")])
+    assert per_file_outputs("out/{stem}_s.laz", src) == [
+        Path("out/x_s.laz"), Path("out/Y_s.laz"), Path("out/z_s.laz")]
+    assert per_file_outputs("{stem}/kept.las", src) == [
+        Path("x/kept.las"), Path("Y/kept.las"), Path("z/kept.las")]
+    assert per_file_outputs(tmp_path / "one.laz", src) is None
