@@ -1950,6 +1950,12 @@ def test_no_edges_on_classes(data_dir, tmp_path):
     va, vb = np.isin(a.classification, [3, 4, 5]), np.isin(b.classification, [3, 4, 5])
     assert a.sharp_edge[va].sum() > 20 and b.sharp_edge[vb].sum() == 0
     assert b.sharp_edge[~vb].sum() > 0.5 * a.sharp_edge[~va].sum()
+    # mode "paper": its threshold from the histogram of the points that may be edge points
+    s = run(tmp_path / "in.laz", tmp_path / "paper.laz", no_edge_classes=[3, 4, 5],
+            options={"mode": "paper", "reach": 12}, **kw)
+    c = laspy.read(tmp_path / "paper.laz")
+    vc = np.isin(c.classification, [3, 4, 5])
+    assert c.sharp_edge[vc].sum() == 0 < c.sharp_edge[~vc].sum() and s.n_output == base.n_output
     np.save(tmp_path / "xyz.npy", np.c_[las.x, las.y, las.z])
     with pytest.raises(InputError, match="no classification dimension"):
         run(tmp_path / "xyz.npy", tmp_path / "o.npy", no_edge_classes=[3], **kw)
