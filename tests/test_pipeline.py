@@ -1943,7 +1943,17 @@ def test_no_edges_on_classes(data_dir, tmp_path):
     las.points = src.points[np.sort(near)]
     las.write(tmp_path / "in.laz")
     kw = {"ratio": 0.2, "tile_points": 12_000}
-    base = run(tmp_path / "in.laz", tmp_path / "base.laz", **kw)
+    base = run(tmp_path / "in.laz", tmp_path / "base.laz", store=tmp_path / "st", **kw)
+    # each tile's mask: its core's classes and its halo's, read from their own tiles
+    from tiledsimplify.pipeline.tile_task import edge_ok
+    from tiledsimplify.tiles import TileStore
+    ts = TileStore.open(tmp_path / "st")
+    classes = np.asarray(las.classification)
+    for t in range(ts.n_tiles):
+        index = np.concatenate([ts.core_index(t), ts.tile_halo(t)[1]])
+        np.testing.assert_array_equal(edge_ok(ts, t, (3, 4, 5)),
+                                      ~np.isin(classes[index], [3, 4, 5]))
+        assert edge_ok(ts, t, ()) is None
     s = run(tmp_path / "in.laz", tmp_path / "veg.laz", no_edge_classes=[5, 3, 4], **kw)
     assert s.n_tiles >= 3 and s.n_output == base.n_output
     a, b = laspy.read(tmp_path / "base.laz"), laspy.read(tmp_path / "veg.laz")
