@@ -544,11 +544,10 @@ def _simplify(args):
         compile_cache.compile_all()
     edge_ok = None
     if args.no_edge_classes:
+        from .pipeline.tile_task import classes_ok, missing_classification
         if "classification" not in dims:
-            raise InputError(f"{args.input}: --no-edges-on names classification codes, but the "
-                             f"input has no classification dimension (it has: "
-                             f"{', '.join(dims) or 'coordinates only'}); leave it out.")
-        edge_ok = ~np.isin(dims["classification"], args.no_edge_classes)
+            raise missing_classification(args.input, dims)
+        edge_ok = classes_ok(dims["classification"], args.no_edge_classes)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", BudgetWarning)
         res = simplify_points(xyz, args.ratio, count=args.count, options=options,

@@ -347,11 +347,18 @@ def variable_chunks(header: laspy.LasHeader) -> bool:
     start it is read by its chunk table instead (:class:`LazChunks`): whole chunks, each
     decompressed from its own bytes.
     """
-    for vlr in header.vlrs:
-        if vlr.user_id == "laszip encoded" and vlr.record_id == 22204:
-            data = vlr.record_data_bytes()
-            return len(data) >= 16 and int.from_bytes(data[12:16], "little") == VARIABLE_CHUNKS
-    return False
+    vlr = _laszip_vlr(header)
+    if vlr is None:
+        return False
+    data = vlr.record_data_bytes()
+    return len(data) >= 16 and int.from_bytes(data[12:16], "little") == VARIABLE_CHUNKS
+
+
+def _laszip_vlr(header: laspy.LasHeader):
+    """The LASzip VLR of a LAZ file's header (user ``laszip encoded``, record 22204), or
+    None (laspy takes it out of the header once it builds the file's decoder)."""
+    return next((v for v in header.vlrs
+                 if v.user_id == "laszip encoded" and v.record_id == 22204), None)
 
 
 @dataclass(frozen=True, eq=False)  # (arrays: compared, they would not give one bool)
@@ -374,9 +381,7 @@ class LazChunks:
     def read(cls, path: Path, header: laspy.LasHeader) -> LazChunks:
         """The table of ``path`` (``header``: its header, the LASzip VLR still in it)."""
         import lazrs
-        vlr = next(v for v in header.vlrs
-                   if v.user_id == "laszip encoded" and v.record_id == 22204)
-        data = bytes(vlr.record_data_bytes())
+        data = bytes(_laszip_vlr(header).record_data_bytes())
         with open(path, "rb") as fh:
             fh.seek(header.offset_to_point_data)
             table = lazrs.read_chunk_table(fh, lazrs.LazVlr(data))

@@ -35,8 +35,7 @@ STEM = "{stem}"
 def _stem(path):
     """``tiles/a.laz`` → ``a``; a COPC file's ``b.copc.laz`` → ``b`` (its output is plain
     LAZ)."""
-    name = Path(path).name
-    stem = name[:-len(Path(name).suffix)] if Path(name).suffix else name
+    stem = Path(path).stem
     return stem[:-5] if stem.lower().endswith(".copc") else stem
 
 

@@ -75,6 +75,7 @@ from .tile_refine import (
 from .tile_task import (
     TILE_RESULTS,
     deviation_histogram,
+    missing_classification,
     simplify_tile,
     threshold_from_histogram,
 )
@@ -274,10 +275,8 @@ def _no_edge_classes(classes, input, source):
     if codes and not 0 <= codes[0] <= codes[-1] <= 255:
         raise InputError(f"no_edge_classes must be classification codes 0-255, got {codes}.")
     if codes and getattr(source, "is_las", False) and \
-            "classification" not in source.attribute_names:
-        raise InputError(f"{input}: no_edge_classes names classification codes, but the input "
-                         "files have no classification dimension in common; leave "
-                         "--no-edges-on out.")
+            "classification" not in source.attribute_names:  # (the files' common dimensions)
+        raise missing_classification(input, source.attribute_names)
     return tuple(codes)
 
 
@@ -958,10 +957,7 @@ def run(input, output, *, ratio=None, count=None, options=None, client=None,
         if outputs is None:  # (each file's output keeps the grid its points were read from)
             check_grid(output, source, ts)
         if no_edge and "classification" not in ts.attribute_names:
-            raise InputError(f"{input}: no_edge_classes names classification codes, but the "
-                             f"input has no classification dimension (it has: "
-                             f"{', '.join(ts.attribute_names) or 'coordinates only'}); leave "
-                             "--no-edges-on out.")
+            raise missing_classification(input, ts.attribute_names)
         degrees = degrees_message(input, *ts.root_attrs["bounds"])
         if degrees:
             log.warning("%s", degrees)

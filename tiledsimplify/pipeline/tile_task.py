@@ -51,6 +51,20 @@ def _tile_cloud(store, tile):
     return xyz, frozen, len(core_xyz)
 
 
+def classes_ok(classification, no_edge):
+    """The points whose ``classification`` is not one of the codes ``no_edge``: those that
+    may be edge points (``simplify_points``' ``edge_ok``)."""
+    return ~np.isin(classification, np.asarray(no_edge))
+
+
+def missing_classification(input, names):
+    """The error for ``no_edge_classes`` on an input whose dimensions ``names`` hold no
+    ``classification``."""
+    return InputError(f"{input}: no_edge_classes (--no-edges-on) names classification codes, "
+                      f"but the input has no classification dimension (it has: "
+                      f"{', '.join(names) or 'coordinates only'}); leave it out.")
+
+
 def edge_ok(store, tile, no_edge):
     """The tile's points (core, then halo, as :func:`_tile_cloud` stacks them) that may be edge
     points: those whose ``classification`` is not one of ``no_edge`` (``simplify_points``'s
@@ -64,7 +78,7 @@ def edge_ok(store, tile, no_edge):
     for u in np.unique(owner).tolist():
         at = owner == u
         halo[at] = store.attrs(u, ["classification"])["classification"][row[at]]
-    return ~np.isin(np.concatenate([core, halo]), np.asarray(no_edge))
+    return classes_ok(np.concatenate([core, halo]), no_edge)
 
 
 def _save_state(store, tile, state, n_points):
@@ -110,8 +124,10 @@ def deviation_histogram(store_path, tile, options, no_edge=()):
     if n_core:
         state, deviation = neighbourhood_state(xyz, frozen, SimplifyOptions(**options))
         _save_state(store, tile, state, len(xyz))
-        ok = edge_ok(store, tile, no_edge)
-        core = deviation[:n_core] if ok is None else deviation[:n_core][ok[:n_core]]
+        core = deviation[:n_core]
+        if no_edge:  # (the core's classes alone: the halo's are other tiles' to count)
+            classes = store.attrs(tile, ["classification"])["classification"]
+            core = core[classes_ok(classes, no_edge)]
         hist = np.histogram(np.clip(core, 0.0, BINS[-1]), bins=BINS)[0]
     return {"tile": int(tile), "hist": hist, "n_points": int(len(xyz)), "n_core": int(n_core),
             "seconds": time.perf_counter() - t0}
