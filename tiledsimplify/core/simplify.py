@@ -207,9 +207,11 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None, allowed=Non
     small holes through thin walls too, as features and flags (:mod:`.holes`), and where that
     sampling is also exact (a CAD model sampled) the points of detail finer than the spacing,
     which no fit explains (:func:`.unresolved.unresolved`). ``detail``: those of them in
-    regions of such detail and not among the features (:func:`.unresolved.regions`), which
-    :func:`simplify_points` makes features where their cover fits within ``edge_share``
-    (:func:`_detail_cover`); none elsewhere and in mode ``"paper"``.
+    regions of such detail and not among the features (:func:`.unresolved.regions`) — where
+    the sampling is not exact (a scan, LiDAR), the regions of points whose smoothed deviation
+    is far above any face's and which no fit explains (:func:`.unresolved.rough_regions`,
+    not flagged) — which :func:`simplify_points` makes features where their cover fits within
+    ``edge_share`` (:func:`_detail_cover`); none in mode ``"paper"``.
     """
     m = Xu.shape[0]
     deviation = np.zeros(m)
@@ -257,15 +259,17 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None, allowed=Non
                                        spacing, corner, distance, own, rim)
     flags = _flags(Xu, st, fitted, fitted_angle, line, width, spacing, corner, bend,
                    own & corner, narrowed)
-    detail = none
+    exact = filled and unresolved_mod.exact_sampling(Xu, st.dn, st.dn_cnt, spacing)
     if filled:  # small holes through thin walls: their rims flagged and kept covered
         rims = holes_mod.hole_rims_near(Xu, st.dn, st.dn_cnt, nn, width, spacing)
         flags |= rims
         features |= rims
-        # detail finer than the sampling (:mod:`.unresolved`; it checks the spacing)
+    if exact:  # detail finer than the sampling (:mod:`.unresolved`; it checks the spacing)
         fine = unresolved(Xu, st.dn, st.dn_cnt, spacing)
         flags |= fine
         detail = unresolved_mod.regions(Xu, fine & ~features, spacing)
+    else:  # a scan's detail: its two-rings' normals turn far more than noise turns them
+        detail = unresolved_mod.rough_regions(Xu, deviation, features, spacing)
     if allowed is not None:
         band, features, flags, detail = (a & allowed for a in (band, features, flags, detail))
     return deviation, band, features, flags, threshold, detail
