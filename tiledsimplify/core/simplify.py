@@ -265,7 +265,7 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None, allowed=Non
         flags |= rims
         features |= rims
     if exact:  # detail finer than the sampling (:mod:`.unresolved`; it checks the spacing)
-        fine = unresolved(Xu, st.dn, st.dn_cnt, spacing)
+        fine = unresolved(Xu, st.dn, st.dn_cnt, spacing, True)
         flags |= fine
         detail = unresolved_mod.regions(Xu, fine & ~features, spacing)
     else:  # a scan's detail: its two-rings' normals turn far more than noise turns them

@@ -183,13 +183,16 @@ def exact_sampling(X, dn, dn_cnt, spacing):
     return exact(rms[sample], spacing)
 
 
-def unresolved(X, dn, dn_cnt, spacing):
+def unresolved(X, dn, dn_cnt, spacing, exact=None):
     """Points of ``X`` (distinct, with local meshes ``dn, dn_cnt``) whose neighbourhood no
-    plane through them holds, if the sampling is exact (:func:`exact_sampling`; see the
-    module notes; none else); ``spacing``: the cloud's."""
+    plane through them holds, if the sampling is exact (:func:`exact_sampling`, unless the
+    caller already knows it: ``exact``; see the module notes; none else); ``spacing``: the
+    cloud's."""
     n = X.shape[0]
     out = np.zeros(n, dtype=bool)
-    if not exact_sampling(X, dn, dn_cnt, spacing):
+    if exact is None:
+        exact = exact_sampling(X, dn, dn_cnt, spacing)
+    if not exact or n == 0 or not spacing > 0:
         return out
     var = np.zeros(n)
     rms = np.full(n, np.inf)
