@@ -207,8 +207,8 @@ def boundary_flags(Xu, st, options, distance_out=None, spacing=None, allowed=Non
     small holes through thin walls too, as features and flags (:mod:`.holes`), and where that
     sampling is also exact (a CAD model sampled) the points of detail finer than the spacing,
     which no fit explains (:func:`.unresolved.unresolved`). ``detail``: those of them in
-    regions of such detail and not among the features (:func:`.unresolved.regions`) — where
-    the sampling is not exact (a scan, LiDAR), the regions of points whose smoothed deviation
+    regions of such detail and not among the features (:func:`.unresolved.regions`) — on
+    other samplings (a scan, LiDAR), the regions of points whose smoothed deviation
     is far above any face's and which no fit explains (:func:`.unresolved.rough_regions`,
     not flagged) — which :func:`simplify_points` makes features where their cover fits within
     ``edge_share`` (:func:`_detail_cover`); none in mode ``"paper"``.

@@ -223,7 +223,8 @@ def regions(X, unresolved_mask, spacing, link=None):
 
 
 def rough_regions(X, deviation, features, spacing):
-    """Regions of detail where the sampling is not exact (a scan, LiDAR): the points whose
+    """Regions of detail where :func:`unresolved` does not run (a sampling that is not exact,
+    or does not fill its tangent planes: a scan, LiDAR): the points whose
     smoothed deviation (:func:`.two_ring.smoothed_deviations`) exceeds
     :data:`ROUGH_DEVIATION` and which no fitted line explains (not ``features``), in groups of
     at least :data:`MIN_REGION` linked within :data:`ROUGH_LINK` ``spacing`` (:func:`regions`).

@@ -155,7 +155,7 @@ def write_per_file(ts, source, outputs, prefix, refined=False, client=None):
                 layouts[f] = output_layout(outputs[f], source.file_header(f))
         return {f: layouts[f] for f in files[i].tolist()}
     held = {}  # file -> its open LasOutput
-    n_out = n_boundary = 0
+    n_out = 0
     try:
         for f in np.flatnonzero(last < 0).tolist():  # no point of the file kept
             with LasOutput(outputs[f], source.file_header(f)):
@@ -170,7 +170,6 @@ def write_per_file(ts, source, outputs, prefix, refined=False, client=None):
                 held[f].write_piece(piece)
                 counts[f] += (piece.count, boundary)
                 n_out += piece.count
-                n_boundary += boundary
                 written(n_out)
             for f in files[t].tolist():
                 if last[f] == t:  # its last tile: done (no tile in flight needs its layout)
@@ -182,5 +181,5 @@ def write_per_file(ts, source, outputs, prefix, refined=False, client=None):
         raise
     log.info("wrote %d output files, one per input file (%s)", len(outputs),
              outputs[0].parent)
-    return n_out, n_boundary, [{"path": str(o), "points": int(m), "boundary": int(b)}
+    return n_out, int(counts[:, 1].sum()), [{"path": str(o), "points": int(m), "boundary": int(b)}
                                for o, (m, b) in zip(outputs, counts.tolist())]
